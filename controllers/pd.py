@@ -1,0 +1,215 @@
+"""The reference controller (SPEC §4): slide PD and a quaternion-log / angular-velocity loop.
+
+Slides (world frame)::
+
+    F = sat( cap(Kp (p_d - p)) + Kd (v_d - v) + b v_d + m g )
+
+``cap`` limits ``|Kp e|`` to ``(b + Kd) v_max`` so far targets are approached at about
+``v_max`` (a soft velocity cap); ``b`` is the slide damping of the model (a feed-forward that
+cancels it along the reference), ``m g`` the weight of the gripper subtree.
+
+Ball joint (gripper frame, as MuJoCo's ball-joint velocities are)::
+
+    theta   = Log(q^-1 q_d)                      (mju_subQuat: minimal angle, short way round)
+    omega_d = cap(omega_ff + K_R theta)          (|omega_d| <= omega_max)
+    tau     = sat( b_rot omega_d + K_w (omega_d - lowpass(omega)) + tau_gravity )
+
+``Log(q^-1 q_d)`` is SPEC's ``Log(q_d q^-1)`` expressed in the body frame (``theta_body =
+R^T theta_world``), which is the frame the torques act in. Saturation is element-wise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import ClassVar
+
+import mujoco
+import numpy as np
+
+from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.jaw import JawCalibration, load_default
+from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
+from peg_ctrl.state import ControlState
+
+__all__ = ["PDConfig", "PDController"]
+
+
+@dataclasses.dataclass(frozen=True)
+class PDConfig:
+    """Gains and limits of the reference controller."""
+
+    name: ClassVar[str] = "pd"
+    kp_pos: float = 3000.0  # slide stiffness [N/m]
+    kd_pos: float = 40.0  # slide damping on top of the joint damping [N s/m]
+    v_max: float = 0.5  # soft cap on approach speed [m/s]
+    k_rot: float = 8.0  # orientation error -> angular velocity gain [1/s]
+    k_omega: float = 20.0  # angular velocity loop gain [N m s/rad]
+    omega_max: float = 1.5  # soft cap on commanded angular speed [rad/s]
+    omega_filter_hz: float = 40.0  # first-order low-pass cut-off on measured omega [Hz]
+    control_dt: float = 0.001  # control period [s]
+    model_feedforward: bool = True  # gravity and joint-damping feed-forward from the model
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"pd.{f.name} must be finite and > 0, got {value!r}")
+
+
+class PDController:
+    """Reference PD / angular-velocity controller. See module docstring for the control law."""
+
+    name = "pd"
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: PDConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
+        self.config = config or PDConfig()
+        self.control_dt = self.config.control_dt
+        self._act = ActuatorMap(model)
+        self._jaw = jaw_calibration or load_default()
+        slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
+        ball_dof = model.joint(BALL_JOINT).dofadr[0]
+        self._b_slide = model.dof_damping[slide_dofs].copy()
+        self._b_ball = model.dof_damping[ball_dof : ball_dof + 3].copy()
+        root = model.body("gripper_root").id
+        self._mass = float(model.body_subtreemass[root])
+        self._gravity = model.opt.gravity.copy()
+        # Centre of mass of the gripper subtree in the gripper frame, at the home pose.
+        scratch = mujoco.MjData(model)
+        key = model.key(HOME_KEY).id if model.nkey else -1
+        if key >= 0:
+            mujoco.mj_resetDataKeyframe(model, scratch, key)
+        mujoco.mj_kinematics(model, scratch)
+        mujoco.mj_comPos(model, scratch)
+        r_world = scratch.subtree_com[root] - scratch.xpos[root]
+        self._com_body = scratch.xmat[root].reshape(3, 3).T @ r_world
+        self._alpha = 1.0 - math.exp(-2.0 * math.pi * self.config.omega_filter_hz * self.control_dt)
+        # Plain floats for the scalar inner loop.
+        self._b_slide = tuple(float(b) for b in self._b_slide)
+        self._b_ball = tuple(float(b) for b in self._b_ball)
+        self._weight = tuple(float(g) * self._mass for g in self._gravity)  # m g, world [N]
+        self._com_body = tuple(float(c) for c in self._com_body)
+        self._slide_cap = (max(self._b_slide) + self.config.kd_pos) * self.config.v_max
+        self._slide_lim = tuple(float(v) for v in self._act.slide_limit)
+        self._ball_lim = tuple(float(v) for v in self._act.ball_limit)
+        self._omega_f = [0.0, 0.0, 0.0]
+        self._jaw_cache = (math.nan, 0.0)
+
+    def reset(self, state: ControlState) -> None:
+        self._omega_f = [float(w) for w in state.omega_body]
+        self._jaw_cache = (math.nan, 0.0)
+
+    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        # Scalar Python on purpose: at 1 kHz, numpy's per-call overhead on 3-vectors would cost
+        # more than the physics step it controls (see `peg-sim bench`).
+        t0 = time.perf_counter()
+        cfg = self.config
+        ff = cfg.model_feedforward
+        px, py, pz = state.p_world.tolist()
+        vx, vy, vz = state.v_world.tolist()
+        tx, ty, tz = target.p_world.tolist()
+        tvx, tvy, tvz = target.v_world.tolist()
+
+        # Slides.
+        kp, kd = cfg.kp_pos, cfg.kd_pos
+        ex, ey, ez = kp * (tx - px), kp * (ty - py), kp * (tz - pz)
+        norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if norm > self._slide_cap:
+            scale = self._slide_cap / norm
+            ex, ey, ez = ex * scale, ey * scale, ez * scale
+        fx = ex + kd * (tvx - vx)
+        fy = ey + kd * (tvy - vy)
+        fz = ez + kd * (tvz - vz)
+        if ff:
+            bx, by, bz = self._b_slide
+            gx, gy, gz = self._weight
+            fx += bx * tvx - gx
+            fy += by * tvy - gy
+            fz += bz * tvz - gz
+        lim = self._slide_lim
+        force = (_clip(fx, lim[0]), _clip(fy, lim[1]), _clip(fz, lim[2]))
+
+        # Ball joint: theta = Log(q^-1 q_d), in the gripper frame.
+        qw, qx, qy, qz = state.quat_world.tolist()
+        dw, dx, dy, dz = target.quat_world.tolist()
+        ew = qw * dw + qx * dx + qy * dy + qz * dz
+        ex = qw * dx - qx * dw - qy * dz + qz * dy
+        ey = qw * dy + qx * dz - qy * dw - qz * dx
+        ez = qw * dz - qx * dy + qy * dx - qz * dw
+        sin_half = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if sin_half > 1e-12:
+            angle = 2.0 * math.atan2(sin_half, ew)
+            if angle > math.pi:  # short way round
+                angle -= 2.0 * math.pi
+            k = angle / sin_half
+            thx, thy, thz = k * ex, k * ey, k * ez
+        else:
+            thx = thy = thz = 0.0
+        fwx, fwy, fwz = target.omega_body.tolist()
+        kr = cfg.k_rot
+        wx, wy, wz = fwx + kr * thx, fwy + kr * thy, fwz + kr * thz
+        w = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if w > cfg.omega_max:
+            scale = cfg.omega_max / w
+            wx, wy, wz = wx * scale, wy * scale, wz * scale
+        a = self._alpha
+        of = self._omega_f
+        mx, my, mz = state.omega_body.tolist()
+        of[0] += a * (mx - of[0])
+        of[1] += a * (my - of[1])
+        of[2] += a * (mz - of[2])
+        kw = cfg.k_omega
+        tqx, tqy, tqz = kw * (wx - of[0]), kw * (wy - of[1]), kw * (wz - of[2])
+        if ff:
+            bx, by, bz = self._b_ball
+            gtx, gty, gtz = self._gravity_torque(qw, qx, qy, qz)
+            tqx += bx * wx + gtx
+            tqy += by * wy + gty
+            tqz += bz * wz + gtz
+        lim = self._ball_lim
+        torque = (_clip(tqx, lim[0]), _clip(tqy, lim[1]), _clip(tqz, lim[2]))
+
+        jaw_sep = float(target.jaw_sep_m)
+        if jaw_sep != self._jaw_cache[0]:
+            self._jaw_cache = (jaw_sep, self._jaw.sep_to_byte(jaw_sep))
+        if not math.isfinite(sum(force) + sum(torque) + self._jaw_cache[1]):
+            check_target(target)  # names the bad entry
+            raise ValueError(f"non-finite control from state at t={state.t}: {state}")
+        ctrl = self._act.pack(force, torque, self._jaw_cache[1])
+        return ControlOutput(ctrl, Diagnostics(solve_time_s=time.perf_counter() - t0))
+
+    def _gravity_torque(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
+        """Body-frame torque that cancels the gripper's weight about the pivot [N m].
+
+        tau_body = -c x (R^T m g), with c the subtree centre of mass in the gripper frame.
+        """
+        gx, gy, gz = self._weight  # m g in the world frame
+        # R^T v = rotate by the conjugate quaternion.
+        bx, by, bz = _rotate(qw, -qx, -qy, -qz, gx, gy, gz)
+        cx, cy, cz = self._com_body
+        return (-(cy * bz - cz * by), -(cz * bx - cx * bz), -(cx * by - cy * bx))
+
+
+def _clip(value: float, limit: float) -> float:
+    return limit if value > limit else (-limit if value < -limit else value)
+
+
+def _rotate(w: float, x: float, y: float, z: float, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
+    """Rotate ``v`` by the unit quaternion ``(w, x, y, z)``."""
+    # t = 2 q_vec x v; v' = v + w t + q_vec x t
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
+    )

@@ -1,0 +1,5 @@
+import sys
+
+from peg_ctrl.cli import main
+
+sys.exit(main())

@@ -1,0 +1,120 @@
+"""Benchmarks: controller overhead over raw physics, measured as a ratio in one run.
+
+Method (so that both sides do exactly the same physics): a closed-loop run records the control
+sequence; the same sequence is then replayed with bare ``mj_step`` from the same initial state,
+which reproduces the trajectory bit for bit. Both are timed in alternating repetitions and the
+medians compared, so machine load affects both sides alike.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from controllers import make_controller
+from peg_ctrl.commands import GripperTarget, euler_to_quat
+from peg_ctrl.scene import build_model
+from peg_ctrl.sim import Simulation
+
+__all__ = ["bench_controller", "run_benchmarks"]
+
+
+def _targets(n_steps: int) -> list[GripperTarget]:
+    """A representative motion: translate 10 cm and turn 95 degrees about X, then hold."""
+    out = []
+    start = np.array([-0.2, 0.0, 0.2])
+    for k in range(n_steps):
+        s = min(1.0, k / (0.6 * n_steps))
+        blend = 3 * s * s - 2 * s**3
+        p = start + blend * np.array([0.1, 0.05, -0.05])
+        out.append(
+            GripperTarget(p_world=p, quat_world=euler_to_quat(blend * np.radians(95), 0.0, 0.0), jaw_sep_m=0.04)
+        )
+    return out
+
+
+def bench_controller(
+    name: str, *, n_steps: int = 2000, repeats: int = 5, control_dt: float | None = None
+) -> dict[str, Any]:
+    """Time ``n_steps`` of physics with controller ``name`` in the loop vs the same physics alone.
+
+    ``control_dt`` [s] overrides the controller's default control period.
+    """
+    model = build_model()
+    params = {} if control_dt is None else {"control_dt": control_dt}
+    sim = Simulation(model, make_controller(name, model, **params))
+    targets = _targets(n_steps // sim.decimation)
+    loop_times, raw_times, solve_times = [], [], []
+    qpos0 = None
+    ctrl_log: list[np.ndarray] = []
+    for rep in range(repeats):
+        sim.reset()
+        qpos0 = sim.data.qpos.copy()
+        ctrl_log = []
+        t0 = time.thread_time()
+        for target in targets:
+            out = sim.control_step(target)
+            ctrl_log.append(np.asarray(out.ctrl))
+            solve_times.append(out.diagnostics.solve_time_s)
+        loop_times.append(time.thread_time() - t0)
+        final_loop = sim.data.qpos.copy()
+
+        data = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, data, 0)
+        data.qpos[:] = qpos0
+        mujoco.mj_forward(model, data)
+        t0 = time.thread_time()
+        for ctrl in ctrl_log:
+            data.ctrl[:] = ctrl
+            mujoco.mj_step(model, data, nstep=sim.decimation)
+        raw_times.append(time.thread_time() - t0)
+        if rep == 0 and not np.array_equal(final_loop, data.qpos):
+            raise RuntimeError("replay diverged from the closed-loop run; benchmark is not comparable")
+    loop = statistics.median(loop_times)
+    raw = statistics.median(raw_times)
+    steps = len(targets) * sim.decimation
+    solve = np.asarray(solve_times)
+    return {
+        "controller": name,
+        "physics_steps": steps,
+        "repeats": repeats,
+        "raw_step_us_median": raw / steps * 1e6,
+        "loop_step_us_median": loop / steps * 1e6,
+        # Median of paired ratios: each repetition's loop and replay ran back to back.
+        "overhead_ratio": statistics.median(a / b for a, b in zip(loop_times, raw_times)) - 1.0,
+        "solve_time_us_median": float(np.median(solve) * 1e6),
+        "solve_time_us_p99": float(np.percentile(solve, 99) * 1e6),
+        "control_period_us": sim.controller.control_dt * 1e6,
+    }
+
+
+def run_benchmarks(
+    out: Path,
+    *,
+    controllers: list[str],
+    n_steps: int,
+    repeats: int,
+    control_dts: list[float | None] | None = None,
+) -> dict[str, Any]:
+    """Run the benchmarks (each controller at each control period) and write JSON to ``out``."""
+    entries = []
+    for c in controllers:
+        for dt in control_dts or [None]:
+            entries.append(bench_controller(c, n_steps=n_steps, repeats=repeats, control_dt=dt))
+    results = {
+        "machine": {"python": platform.python_version(), "mujoco": mujoco.__version__, "cpu": platform.machine()},
+        "method": "closed loop vs replay of its own control sequence with bare mj_step; "
+        "alternating repetitions, medians of CPU time",
+        "target": "overhead_ratio <= 0.05",
+        "controllers": entries,
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=2) + "\n")
+    return results

@@ -1,0 +1,149 @@
+"""The command API: ``u = [x, y, z, roll, pitch, yaw, jaw_sep_m]``.
+
+Position is the gripper's pinch point in [m]; orientation is the gripper's rotation from its
+home pose (fingers down, jaw closing along world X) as extrinsic X-Y-Z Euler angles in [rad],
+i.e. ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``; ``jaw_sep_m`` is the separation between the finger
+pads in [m]. A command may be given in a task frame ``T_world_task``; it is converted to the
+world frame before it reaches a controller.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Sequence
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "JAW_SEP_MAX_M",
+    "COMMAND_FIELDS",
+    "GripperTarget",
+    "TaskFrame",
+    "command_to_target",
+    "euler_to_quat",
+    "quat_to_euler",
+]
+
+JAW_SEP_MAX_M = 0.085
+POSITION_LIMIT_M = 10.0  # slide joint range (SPEC §3.2)
+COMMAND_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw", "jaw_sep_m")
+
+
+def euler_to_quat(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
+    """Quaternion ``[w, x, y, z]`` of ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    quat = np.empty(4)
+    mujoco.mju_euler2Quat(quat, np.array([roll, pitch, yaw], dtype=float), "XYZ")
+    return quat
+
+
+def quat_to_euler(quat: Sequence[float]) -> NDArray[np.float64]:
+    """Extrinsic X-Y-Z Euler angles ``[roll, pitch, yaw]`` [rad] of a unit quaternion ``[w, x, y, z]``.
+
+    Pitch is in [-pi/2, pi/2]; at exactly +-pi/2 roll and yaw are not unique (roll is set to 0).
+    """
+    w, x, y, z = (float(v) for v in quat)
+    sinp = 2.0 * (w * y - z * x)
+    pitch = math.copysign(math.pi / 2.0, sinp) if abs(sinp) >= 1.0 else math.asin(sinp)
+    if abs(sinp) >= 1.0 - 1e-12:
+        roll = 0.0
+        yaw = math.atan2(-2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z))
+    else:
+        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return np.array([roll, pitch, yaw])
+
+
+@dataclasses.dataclass(frozen=True)
+class GripperTarget:
+    """What a controller tracks, all in the world frame.
+
+    Attributes:
+        p_world: Pinch-point position, shape (3,), [m].
+        quat_world: Gripper orientation ``[w, x, y, z]``, shape (4,), unit norm.
+        v_world: Feed-forward linear velocity, shape (3,), [m/s].
+        omega_body: Feed-forward angular velocity in the gripper frame, shape (3,), [rad/s].
+        jaw_sep_m: Desired pad separation [m], in [0, 0.085].
+    """
+
+    p_world: NDArray[np.float64]
+    quat_world: NDArray[np.float64]
+    v_world: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
+    omega_body: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
+    jaw_sep_m: float = JAW_SEP_MAX_M
+
+    def __post_init__(self) -> None:
+        for name, size in (("p_world", 3), ("quat_world", 4), ("v_world", 3), ("omega_body", 3)):
+            value = np.asarray(getattr(self, name), dtype=float)
+            if value.shape != (size,):
+                raise ValueError(f"GripperTarget.{name} must have shape ({size},), got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"GripperTarget.{name} must be finite, got {value.tolist()}")
+            object.__setattr__(self, name, value)
+        norm = float(np.linalg.norm(self.quat_world))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"GripperTarget.quat_world must be a unit quaternion, norm is {norm:.6g}")
+        _check_jaw(self.jaw_sep_m)
+        if np.any(np.abs(self.p_world) > POSITION_LIMIT_M):
+            raise ValueError(
+                f"GripperTarget.p_world {self.p_world.tolist()} is outside the slide range "
+                f"[-{POSITION_LIMIT_M}, {POSITION_LIMIT_M}] m"
+            )
+
+    @classmethod
+    def from_pose(
+        cls, *, p_world: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0), jaw_sep_m: float
+    ) -> GripperTarget:
+        """Target from a position [m], extrinsic X-Y-Z Euler angles [rad] and a jaw separation [m]."""
+        return cls(
+            p_world=np.asarray(p_world, dtype=float),
+            quat_world=euler_to_quat(*[float(a) for a in rpy]),
+            jaw_sep_m=jaw_sep_m,
+        )
+
+
+def _check_jaw(jaw_sep_m: float) -> None:
+    if not (math.isfinite(jaw_sep_m) and 0.0 <= jaw_sep_m <= JAW_SEP_MAX_M):
+        raise ValueError(f"jaw_sep_m must be in [0, {JAW_SEP_MAX_M}] m, got {jaw_sep_m!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskFrame:
+    """A fixed frame ``T_world_task``: origin ``p_world`` [m] and orientation ``quat_world``."""
+
+    p_world: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat_world: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+
+
+WORLD = TaskFrame()
+
+
+def command_to_target(u: Sequence[float], *, frame: TaskFrame = WORLD) -> GripperTarget:
+    """Validate a command vector ``[x, y, z, roll, pitch, yaw, jaw_sep_m]`` and express it in the world.
+
+    Raises:
+        ValueError: wrong length, a non-finite entry (named), a jaw separation outside
+            [0, 0.085] m, or a position outside the slide range.
+    """
+    values = np.asarray(u, dtype=float).reshape(-1)
+    if values.shape != (7,):
+        raise ValueError(
+            f"command must have 7 entries {list(COMMAND_FIELDS)}, got {values.shape[0]}"
+        )
+    for name, value in zip(COMMAND_FIELDS, values):
+        if not math.isfinite(value):
+            raise ValueError(f"command entry {name!r} must be finite, got {value!r}")
+    _check_jaw(float(values[6]))
+    quat_task = euler_to_quat(*values[3:6])
+    p_world = values[:3].copy()
+    quat_world = quat_task
+    if frame != WORLD:
+        q_frame = np.asarray(frame.quat_world, dtype=float)
+        p_world = np.empty(3)
+        mujoco.mju_rotVecQuat(p_world, values[:3], q_frame)
+        p_world += np.asarray(frame.p_world, dtype=float)
+        quat_world = np.empty(4)
+        mujoco.mju_mulQuat(quat_world, q_frame, quat_task)
+    return GripperTarget(p_world=p_world, quat_world=quat_world, jaw_sep_m=float(values[6]))

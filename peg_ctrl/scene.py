@@ -1,0 +1,365 @@
+"""Assemble the peg-in-hole scene with ``mujoco.MjSpec``.
+
+Layout (world frame, Z up, metres):
+
+- a table plane at z = 0;
+- a static block (``block``) whose hole axis passes through ``SceneConfig.hole_xy``; one visual
+  mesh (non-colliding) and ``n_parts`` convex collision meshes ``object_01`` .. ``object_NN``;
+- a free peg (``peg``) lying on the table, its axis along world Y (rotated 90 degrees about X);
+- the Menagerie Robotiq 2F-85 attached under body ``gripper_root``, which moves on three slide
+  joints and a ball joint (SPEC §3.2).
+
+The ball joint's centre is the gripper's ``pinch`` site, so the slide coordinates *are* the pinch
+point's world position and rotations turn a grasped object about the grasp point. In the home
+orientation (ball joint at identity) the fingers point down (-Z) and the jaw closes along world X.
+
+Contact override (SPEC §3.4): ``opt.o_solref`` and ``opt.o_solimp`` are stored, but MuJoCo applies
+them only when the ``override`` enable flag is set, and then to *every* contact, replacing all
+per-geom ``solref``/``solimp``. Since the per-geom values of the peg, block and pads must govern
+their contacts, the flag stays off; ``SceneConfig.contact_override=True`` turns it on for studies.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from peg_ctrl.assets import AssetParams, ensure_assets, part_name
+from peg_ctrl.menagerie import gripper_xml
+
+__all__ = [
+    "SceneConfig",
+    "build_spec",
+    "build_model",
+    "export_scene",
+    "SLIDE_JOINTS",
+    "BALL_JOINT",
+    "SLIDE_ACTUATORS",
+    "BALL_ACTUATORS",
+    "JAW_ACTUATOR",
+    "PINCH_SITE",
+    "GRIPPER_PREFIX",
+    "HOME_KEY",
+]
+
+SLIDE_JOINTS = ("gripper_transX", "gripper_transY", "gripper_transZ")
+BALL_JOINT = "gripper_rot"
+SLIDE_ACTUATORS = ("act_transX", "act_transY", "act_transZ")
+BALL_ACTUATORS = ("act_rotX", "act_rotY", "act_rotZ")
+GRIPPER_PREFIX = "2f85/"  # prefix of every name that comes from the Menagerie model
+JAW_ACTUATOR = GRIPPER_PREFIX + "fingers_actuator"
+PINCH_SITE = GRIPPER_PREFIX + "pinch"
+HOME_KEY = "home"
+
+# Pinch site height above the Menagerie model's own world origin: base_mount at 0.007, base at
+# +0.0038, pinch at +0.145 along the approach axis (values from 2f85.xml).
+_PINCH_IN_MENAGERIE = 0.007 + 0.0038 + 0.145
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneConfig:
+    """Everything that changes the compiled model. Lengths in [m], angles in [rad]."""
+
+    assets: AssetParams = AssetParams()
+    hole_xy: tuple[float, float] = (0.20, 0.0)  # hole axis position on the table [m]
+    peg_xy: tuple[float, float] = (-0.20, 0.0)  # peg centre at rest [m]
+    gripper_home: tuple[float, float, float] = (-0.20, 0.0, 0.20)  # pinch point at home [m]
+    jaw_home_byte: float = 0.0  # jaw actuator command at home (0 = open)
+    slide_force_limit: float = 100.0  # per-axis slide actuator force range [N]
+    ball_torque_limit: float = 80.0  # per-axis ball-joint torque range [N m]
+    peg_density: float = 500.0  # [kg/m^3]
+    block_density: float = 1000.0  # [kg/m^3] (block is static; kept for the record)
+    peg_friction: tuple[float, float, float] = (0.8, 0.1, 1e-4)
+    block_friction: tuple[float, float, float] = (0.9, 0.1, 1e-4)
+    contact_override: bool = False  # see module docstring
+
+    def __post_init__(self) -> None:
+        for name in ("slide_force_limit", "ball_torque_limit", "peg_density", "block_density"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"SceneConfig.{name} must be finite and > 0, got {value!r}")
+        if not 0.0 <= self.jaw_home_byte <= 255.0:
+            raise ValueError(f"SceneConfig.jaw_home_byte must be in [0, 255], got {self.jaw_home_byte!r}")
+
+    @property
+    def block_pos(self) -> tuple[float, float, float]:
+        """Block centre [m]: the block stands on the table."""
+        return (self.hole_xy[0], self.hole_xy[1], 0.5 * self.assets.block_size[2])
+
+    @property
+    def peg_rest_pos(self) -> tuple[float, float, float]:
+        """Peg centre lying on the table [m]."""
+        return (self.peg_xy[0], self.peg_xy[1], self.assets.peg_radius)
+
+
+# 90 degrees about X: the peg's axis (local Z) lies along world -Y.
+PEG_LYING_QUAT = (np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0)
+
+
+def _set_physics_options(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    opt = spec.option
+    opt.timestep = 0.001
+    opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    opt.solver = mujoco.mjtSolver.mjSOL_CG
+    opt.noslip_iterations = 20
+    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    opt.impratio = 10.0
+    opt.o_solref = [0.005, 0.9]
+    opt.o_solimp = [0.9, 0.9, 0.01, 0.5, 2.0]
+    if cfg.contact_override:
+        opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_OVERRIDE)
+
+
+def _add_mesh(spec: mujoco.MjSpec, name: str, path: Path) -> None:
+    mesh = spec.add_mesh()
+    mesh.name = name
+    mesh.file = str(path)
+
+
+def _add_table(spec: mujoco.MjSpec) -> None:
+    tex = spec.add_texture()
+    tex.name = "grid"
+    tex.type = mujoco.mjtTexture.mjTEXTURE_2D
+    tex.builtin = mujoco.mjtBuiltin.mjBUILTIN_CHECKER
+    tex.rgb1 = [0.32, 0.35, 0.38]
+    tex.rgb2 = [0.28, 0.30, 0.33]
+    tex.width = 512
+    tex.height = 512
+    mat = spec.add_material()
+    mat.name = "table"
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
+    mat.texrepeat = [8, 8]
+    table = spec.worldbody.add_geom()
+    table.name = "table"
+    table.type = mujoco.mjtGeom.mjGEOM_PLANE
+    table.size = [1.0, 1.0, 0.05]
+    table.material = "table"
+
+
+def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> None:
+    _add_mesh(spec, "block_visual", files["block_visual"])
+    block = spec.worldbody.add_body()
+    block.name = "block"
+    block.pos = list(cfg.block_pos)
+    visual = block.add_geom()
+    visual.name = "block_visual"
+    visual.type = mujoco.mjtGeom.mjGEOM_MESH
+    visual.meshname = "block_visual"
+    visual.contype = 0
+    visual.conaffinity = 0
+    visual.group = 2
+    visual.density = 0.0
+    visual.rgba = [0.55, 0.42, 0.30, 1.0]
+    for i in range(cfg.assets.n_parts):
+        name = part_name(i)
+        _add_mesh(spec, name, files[name])
+        geom = block.add_geom()
+        geom.name = name
+        geom.type = mujoco.mjtGeom.mjGEOM_MESH
+        geom.meshname = name
+        geom.group = 3
+        geom.density = cfg.block_density
+        geom.friction = list(cfg.block_friction)
+        geom.condim = 6
+        # margin = gap: contacts are detected 1 mm early but produce force only on penetration,
+        # so the effective hole clearance is the geometric one.
+        geom.margin = 0.001
+        geom.gap = 0.001
+        geom.solref = [0.01, 1.0]
+        geom.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
+        geom.rgba = [0.55, 0.42, 0.30, 0.4]
+    site = block.add_site()
+    site.name = "hole_top"
+    site.pos = [0.0, 0.0, 0.5 * cfg.assets.block_size[2]]
+    site.size = [0.002, 0.002, 0.002]
+    site.group = 5
+
+
+def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> None:
+    _add_mesh(spec, "peg", files["peg"])
+    peg = spec.worldbody.add_body()
+    peg.name = "peg"
+    peg.pos = list(cfg.peg_rest_pos)
+    peg.quat = list(PEG_LYING_QUAT)
+    joint = peg.add_freejoint()
+    joint.name = "peg_free"
+    geom = peg.add_geom()
+    geom.name = "peg"
+    geom.type = mujoco.mjtGeom.mjGEOM_MESH
+    geom.meshname = "peg"
+    geom.density = cfg.peg_density
+    geom.friction = list(cfg.peg_friction)
+    geom.condim = 6
+    geom.solref = [0.005, 1.0]
+    geom.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
+    geom.rgba = [0.20, 0.45, 0.80, 1.0]
+    half = 0.5 * cfg.assets.peg_length
+    for name, z in (("peg_bottom", -half), ("peg_top", half)):
+        site = peg.add_site()
+        site.name = name
+        site.pos = [0.0, 0.0, z]
+        site.size = [0.002, 0.002, 0.002]
+        site.group = 5
+
+
+def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    root = spec.worldbody.add_body()
+    root.name = "gripper_root"
+    root.mass = 0.1
+    root.inertia = [0.01, 0.01, 0.01]
+    root.explicitinertial = True
+    for name, axis in zip(SLIDE_JOINTS, np.eye(3)):
+        joint = root.add_joint()
+        joint.name = name
+        joint.type = mujoco.mjtJoint.mjJNT_SLIDE
+        joint.axis = list(axis)
+        joint.range = [-10.0, 10.0]
+        joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        joint.damping = [100.0, 0.0, 0.0]
+    ball = root.add_joint()
+    ball.name = BALL_JOINT
+    ball.type = mujoco.mjtJoint.mjJNT_BALL
+    ball.damping = [50.0, 0.0, 0.0]
+    ball.stiffness = [0.0, 0.0, 0.0]
+    ball.armature = 0.1
+
+    # Hang the gripper upside down (180 degrees about X) so the pinch site sits at the origin.
+    frame = root.add_frame()
+    frame.quat = [0.0, 1.0, 0.0, 0.0]
+    frame.pos = [0.0, 0.0, _PINCH_IN_MENAGERIE]
+    gripper = mujoco.MjSpec.from_file(str(gripper_xml()))
+    meshdir = Path(gripper.modelfiledir) / gripper.meshdir
+    for mesh in gripper.meshes:
+        mesh.file = str((meshdir / mesh.file).resolve())
+    frame.attach_body(gripper.body("base_mount"), GRIPPER_PREFIX, "")
+    # The child's tendon, equalities, excludes and actuator come along with the attached body.
+
+    gear_axes = np.eye(3)
+    for name, joint_name in zip(SLIDE_ACTUATORS, SLIDE_JOINTS):
+        act = spec.add_actuator()
+        act.name = name
+        act.target = joint_name
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.ctrlrange = [-cfg.slide_force_limit, cfg.slide_force_limit]
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+    for name, axis in zip(BALL_ACTUATORS, gear_axes):
+        act = spec.add_actuator()
+        act.name = name
+        act.target = BALL_JOINT
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.gear = [*axis, 0.0, 0.0, 0.0]
+        act.ctrlrange = [-cfg.ball_torque_limit, cfg.ball_torque_limit]
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+
+
+def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    light = spec.worldbody.add_light()
+    light.pos = [0.0, -0.3, 1.2]
+    light.dir = [0.0, 0.2, -1.0]
+    light.castshadow = True
+    hx, hy = cfg.hole_xy
+    cam = spec.worldbody.add_camera()
+    cam.name = "insertion"
+    # Look at a point just above the hole from the front-right.
+    target = np.array([hx - 0.05, hy, 0.06])
+    eye = np.array([hx + 0.25, hy - 0.45, 0.30])
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    cam.pos = list(eye)
+    # A camera looks along its -Z with +Y up.
+    rot = np.column_stack([right, up, -forward])
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rot.flatten())
+    cam.quat = list(quat)
+    cam.fovy = 50.0
+    overview = spec.worldbody.add_camera()
+    overview.name = "overview"
+    target = np.array([0.0, 0.0, 0.08])
+    eye = np.array([0.0, -0.75, 0.45])
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    overview.pos = list(eye)
+    mujoco.mju_mat2Quat(quat, np.column_stack([right, up, -forward]).flatten())
+    overview.quat = list(quat)
+    overview.fovy = 45.0
+
+
+def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel, cfg: SceneConfig) -> None:
+    qpos = model.qpos0.copy()
+    for name, value in zip(SLIDE_JOINTS, cfg.gripper_home):
+        qpos[model.joint(name).qposadr[0]] = value
+    ball = model.joint(BALL_JOINT).qposadr[0]
+    qpos[ball : ball + 4] = [1.0, 0.0, 0.0, 0.0]
+    ctrl = np.zeros(model.nu)
+    ctrl[model.actuator(JAW_ACTUATOR).id] = cfg.jaw_home_byte
+    key = spec.add_key()
+    key.name = HOME_KEY
+    key.qpos = list(qpos)
+    key.ctrl = list(ctrl)
+
+
+def build_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
+    """The scene as an editable ``MjSpec`` (with a ``home`` keyframe)."""
+    cfg = cfg or SceneConfig()
+    files = ensure_assets(cfg.assets)
+    spec = mujoco.MjSpec()
+    spec.modelname = "peg_in_hole"
+    spec.compiler.degree = False
+    spec.visual.global_.offwidth = 1280
+    spec.visual.global_.offheight = 720
+    _set_physics_options(spec, cfg)
+    _add_table(spec)
+    _add_block(spec, cfg, files)
+    _add_peg(spec, cfg, files)
+    _add_gripper(spec, cfg)
+    _add_cameras_and_lights(spec, cfg)
+    model = spec.compile()
+    _add_home_key(spec, model, cfg)
+    return spec
+
+
+def build_model(cfg: SceneConfig | None = None) -> mujoco.MjModel:
+    """Compile the scene. The ``home`` keyframe holds the initial state."""
+    return build_spec(cfg).compile()
+
+
+def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
+    """Write ``out_dir/scene.xml`` plus its meshes under ``out_dir/meshes``.
+
+    The result loads with plain ``mujoco.MjModel.from_xml_path`` and opens in MuJoCo's own viewer.
+    """
+    import xml.etree.ElementTree as ET
+
+    spec = build_spec(cfg)
+    out_dir = Path(out_dir)
+    mesh_dir = out_dir / "meshes"
+    mesh_dir.mkdir(parents=True, exist_ok=True)
+    # Serialise with absolute mesh paths (the spec compiles), then point them at local copies.
+    root = ET.fromstring(spec.to_xml())
+    for elem in root.iter("mesh"):
+        src = elem.get("file")
+        if src is None:
+            continue
+        dst_name = (elem.get("name") or Path(src).stem).replace("/", "_") + Path(src).suffix
+        shutil.copyfile(src, mesh_dir / dst_name)
+        elem.set("file", dst_name)
+    compiler = root.find("compiler")
+    if compiler is None:
+        compiler = ET.Element("compiler")
+        root.insert(0, compiler)
+    compiler.set("meshdir", "meshes")
+    path = out_dir / "scene.xml"
+    ET.indent(root)
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    mujoco.MjModel.from_xml_path(str(path))  # fail here, not in the user's viewer
+    return path

@@ -1,0 +1,201 @@
+"""Typed views of the simulation state.
+
+Two levels, because the control loop runs at 1 kHz and a full snapshot is not free:
+
+- :class:`ControlState` — what every controller sees each control step: gripper pose and
+  velocity, jaw separation and time. Cheap to build (two array copies).
+- :class:`SimState` — a full snapshot for logs and analysis: adds the peg's pose and velocity
+  and the contacts grouped by body pair.
+
+:class:`StateReader` resolves all indices once from the model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, SLIDE_JOINTS
+
+__all__ = ["ControlState", "PairContact", "SimState", "StateReader", "BODY_GROUPS"]
+
+BODY_GROUPS = ("gripper", "peg", "block", "table")
+
+
+class ControlState(NamedTuple):
+    """Gripper state at time ``t`` [s].
+
+    ``p_world`` (3,) [m] pinch point; ``quat_world`` (4,) ``[w, x, y, z]``; ``v_world`` (3,) [m/s];
+    ``omega_body`` (3,) [rad/s] angular velocity in the gripper frame; ``jaw_sep_m`` [m] measured
+    between the pad faces.
+    """
+
+    t: float
+    p_world: NDArray[np.float64]
+    quat_world: NDArray[np.float64]
+    v_world: NDArray[np.float64]
+    omega_body: NDArray[np.float64]
+    jaw_sep_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class PairContact:
+    """Summed contact between two body groups.
+
+    ``force_world`` (3,) [N] is the force the second group exerts on the first, summed over
+    ``count`` contacts; ``position_world`` (3,) [m] is their force-weighted centroid;
+    ``max_penetration_m`` the deepest penetration among them.
+    """
+
+    pair: tuple[str, str]
+    force_world: NDArray[np.float64]
+    magnitude: float
+    position_world: NDArray[np.float64]
+    count: int
+    max_penetration_m: float
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "pair": "-".join(self.pair),
+            "force": [round(float(f), 6) for f in self.force_world],
+            "magnitude": round(self.magnitude, 6),
+            "position": [round(float(p), 6) for p in self.position_world],
+            "count": self.count,
+            "max_penetration_m": round(self.max_penetration_m, 9),
+        }
+
+
+@dataclasses.dataclass(frozen=True)
+class SimState:
+    """A full snapshot at time ``t`` [s]; vectors in the world frame unless named ``_body``.
+
+    ``omega_body_peg`` is the peg's angular velocity in its own frame (MuJoCo's free-joint convention).
+    """
+
+    control: ControlState
+    p_world_peg: NDArray[np.float64]
+    quat_world_peg: NDArray[np.float64]
+    v_world_peg: NDArray[np.float64]
+    omega_body_peg: NDArray[np.float64]
+    contacts: tuple[PairContact, ...]
+
+    @property
+    def t(self) -> float:
+        return self.control.t
+
+    def contact(self, a: str, b: str) -> PairContact | None:
+        key = tuple(sorted((a, b)))
+        for c in self.contacts:
+            if c.pair == key:
+                return c
+        return None
+
+
+class StateReader:
+    """Reads :class:`ControlState` / :class:`SimState` from ``MjData`` using indices resolved once."""
+
+    def __init__(self, model: mujoco.MjModel, *, contact_threshold_n: float = 0.01) -> None:
+        self.model = model
+        self.contact_threshold_n = contact_threshold_n
+        self._slide_qpos = np.array([model.joint(n).qposadr[0] for n in SLIDE_JOINTS])
+        self._slide_dof = np.array([model.joint(n).dofadr[0] for n in SLIDE_JOINTS])
+        self._q0 = int(self._slide_qpos[0])
+        self._v0 = int(self._slide_dof[0])
+        if not (np.all(np.diff(self._slide_qpos) == 1) and np.all(np.diff(self._slide_dof) == 1)):
+            raise ValueError("slide joints must be consecutive in qpos/qvel")
+        ball = model.joint(BALL_JOINT)
+        if ball.qposadr[0] != self._q0 + 3 or ball.dofadr[0] != self._v0 + 3:
+            raise ValueError("the ball joint must follow the slide joints in qpos/qvel")
+        peg_joint = model.joint("peg_free")
+        self._peg_q = int(peg_joint.qposadr[0])
+        self._peg_v = int(peg_joint.dofadr[0])
+        self._pads = [model.geom(GRIPPER_PREFIX + n).id for n in ("left_pad1", "right_pad1")]
+        # Box half-thickness along the closing direction (local y of the pad boxes).
+        self._pad_half_sum = float(sum(model.geom_size[g][1] for g in self._pads))
+        self._body_group = self._classify_bodies(model)
+
+    @staticmethod
+    def _classify_bodies(model: mujoco.MjModel) -> NDArray[np.int64]:
+        """Group index (into BODY_GROUPS) of every body; world bodies (table plane) are 'table'."""
+        groups = np.full(model.nbody, BODY_GROUPS.index("table"), dtype=np.int64)
+        root = model.body("gripper_root").id
+        for b in range(model.nbody):
+            a = b
+            while a != 0 and a != root:
+                a = model.body_parentid[a]
+            if a == root:
+                groups[b] = BODY_GROUPS.index("gripper")
+        groups[model.body("peg").id] = BODY_GROUPS.index("peg")
+        groups[model.body("block").id] = BODY_GROUPS.index("block")
+        return groups
+
+    def jaw_sep_m(self, data: mujoco.MjData) -> float:
+        """Distance between the inner faces of the two pads [m] (from the last kinematics pass)."""
+        left, right = self._pads
+        xl = data.geom_xpos[left].tolist()
+        xr = data.geom_xpos[right].tolist()
+        dist = math.sqrt((xr[0] - xl[0]) ** 2 + (xr[1] - xl[1]) ** 2 + (xr[2] - xl[2]) ** 2)
+        return dist - self._pad_half_sum
+
+    def control_state(self, data: mujoco.MjData) -> ControlState:
+        q = data.qpos[self._q0 : self._q0 + 7].copy()
+        v = data.qvel[self._v0 : self._v0 + 6].copy()
+        return ControlState(float(data.time), q[:3], q[3:], v[:3], v[3:], self.jaw_sep_m(data))
+
+    def contacts(self, data: mujoco.MjData) -> tuple[PairContact, ...]:
+        """Contacts above the threshold, summed per body-group pair, sorted by pair name."""
+        model = self.model
+        if data.ncon == 0:
+            return ()
+        sums: dict[tuple[str, str], list] = {}
+        wrench = np.zeros(6)
+        for i in range(data.ncon):
+            con = data.contact[i]
+            if con.efc_address < 0:
+                continue  # detected within the margin but not active
+            mujoco.mj_contactForce(model, data, i, wrench)
+            frame = con.frame.reshape(3, 3)
+            f_world = frame.T @ wrench[:3]  # force on geom2 from geom1, world frame
+            g1 = BODY_GROUPS[self._body_group[model.geom_bodyid[con.geom1]]]
+            g2 = BODY_GROUPS[self._body_group[model.geom_bodyid[con.geom2]]]
+            if g1 == g2:
+                continue
+            # Report the force acting on the alphabetically first group.
+            if g1 < g2:
+                pair, f_on_first = (g1, g2), -f_world
+            else:
+                pair, f_on_first = (g2, g1), f_world
+            entry = sums.setdefault(pair, [np.zeros(3), np.zeros(3), 0.0, 0, 0.0])
+            mag = float(np.linalg.norm(f_on_first))
+            entry[0] += f_on_first
+            entry[1] += mag * con.pos
+            entry[2] += mag
+            entry[3] += 1
+            entry[4] = max(entry[4], -float(con.dist))
+        out = []
+        for pair in sorted(sums):
+            force, weighted_pos, total, count, pen = sums[pair]
+            magnitude = float(np.linalg.norm(force))
+            if total < self.contact_threshold_n:
+                continue
+            out.append(
+                PairContact(pair, force, magnitude, weighted_pos / total, count, max(pen, 0.0))
+            )
+        return tuple(out)
+
+    def sim_state(self, data: mujoco.MjData) -> SimState:
+        pq = data.qpos[self._peg_q : self._peg_q + 7].copy()
+        pv = data.qvel[self._peg_v : self._peg_v + 6].copy()
+        return SimState(
+            control=self.control_state(data),
+            p_world_peg=pq[:3],
+            quat_world_peg=pq[3:],
+            v_world_peg=pv[:3],
+            omega_body_peg=pv[3:],
+            contacts=self.contacts(data),
+        )
