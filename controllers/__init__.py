@@ -6,7 +6,8 @@ through the :class:`~controllers.base.Controller` protocol.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import mujoco
 

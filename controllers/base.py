@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Protocol, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple, Protocol
 
 import mujoco
 import numpy as np
-from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
@@ -67,9 +67,9 @@ class ActuatorMap:
     ) -> list[float]:
         """``ctrl`` (nu,) from slide forces [N], ball torques [N m] and the jaw byte."""
         values = [0.0] * self.nu
-        for i, f in zip(self._slides, force_world):
+        for i, f in zip(self._slides, force_world, strict=True):
             values[i] = f
-        for i, t in zip(self._ball, torque_body):
+        for i, t in zip(self._ball, torque_body, strict=True):
             values[i] = t
         values[self.jaw] = jaw_byte
         return values

@@ -26,7 +26,6 @@ import time
 from typing import ClassVar
 
 import mujoco
-import numpy as np
 
 from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
 from peg_ctrl.commands import GripperTarget
@@ -202,7 +201,9 @@ def _clip(value: float, limit: float) -> float:
     return limit if value > limit else (-limit if value < -limit else value)
 
 
-def _rotate(w: float, x: float, y: float, z: float, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
+def _rotate(
+    w: float, x: float, y: float, z: float, vx: float, vy: float, vz: float
+) -> tuple[float, float, float]:
     """Rotate ``v`` by the unit quaternion ``(w, x, y, z)``."""
     # t = 2 q_vec x v; v' = v + w t + q_vec x t
     tx = 2.0 * (y * vz - z * vy)

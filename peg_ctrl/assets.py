@@ -1,8 +1,11 @@
 """Parametric peg and block-with-hole meshes, generated reproducibly.
 
 The block is a rectangular prism with a vertical through-hole. The hole is a regular
-``n_parts``-gon whose *inradius* is ``peg_radius + clearance``, so the radial clearance at
-the flats is exactly ``clearance`` (more at the corners). The solid around it is split into
+``n_parts``-gon whose *inradius* is ``peg_radius + clearance + contact_margin``. The block's
+collision geoms carry a contact margin (SPEC: 1 mm), and MuJoCo makes a contact active once the
+surfaces are closer than the margin, so the margin is added to the geometry: the *effective*
+radial clearance at the flats, where contact forces start, is exactly ``clearance`` (more at the
+corners). The solid around it is split into
 ``n_parts`` convex prisms, one per polygon edge: part ``i`` is bounded by edge ``i`` of the
 hole polygon, the two rays from the hole axis through that edge's end points, and the outer
 walls of the block. These parts tile the block exactly and never overlap the hole.
@@ -54,6 +57,7 @@ class AssetParams:
     block_size: tuple[float, float, float] = (0.080, 0.080, 0.050)  # full extents x, y, z [m]
     n_parts: int = 10  # convex collision parts around the hole (and hole polygon sides)
     chamfer: float = 0.0  # depth and width of the 45-degree chamfer at the hole mouth [m]
+    contact_margin: float = 0.001  # contact margin of the block geoms, added to the hole [m]
     peg_segments: int = 32  # sides of the polygonal peg cross-section
 
     def __post_init__(self) -> None:
@@ -61,9 +65,11 @@ class AssetParams:
         _check_positive("peg_length", self.peg_length)
         if not (np.isfinite(self.clearance) and self.clearance >= 0.0):
             raise ValueError(f"clearance must be >= 0 m, got {self.clearance!r}")
+        if not (np.isfinite(self.contact_margin) and self.contact_margin >= 0.0):
+            raise ValueError(f"contact_margin must be >= 0 m, got {self.contact_margin!r}")
         if len(self.block_size) != 3:
             raise ValueError(f"block_size must have 3 entries (x, y, z), got {self.block_size!r}")
-        for axis, value in zip("xyz", self.block_size):
+        for axis, value in zip("xyz", self.block_size, strict=True):
             _check_positive(f"block_size.{axis}", value)
         if not (isinstance(self.n_parts, int) and self.n_parts >= 4):
             raise ValueError(f"n_parts must be an integer >= 4, got {self.n_parts!r}")
@@ -83,8 +89,8 @@ class AssetParams:
 
     @property
     def hole_inradius(self) -> float:
-        """Distance from the hole axis to the hole's flat faces [m]."""
-        return self.peg_radius + self.clearance
+        """Distance from the hole axis to the hole's flat faces (geometric, incl. margin) [m]."""
+        return self.peg_radius + self.clearance + self.contact_margin
 
     @property
     def hole_circumradius(self) -> float:
@@ -334,9 +340,7 @@ def ensure_assets(params: AssetParams) -> dict[str, Path]:
     expected = json.dumps(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
     meta = directory / "params.json"
     names = ["peg", "block_visual", *(part_name(i) for i in range(params.n_parts))]
-    files = {
-        name: directory / f"{name}.stl" for name in names
-    }
+    files = {name: directory / f"{name}.stl" for name in names}
     if meta.is_file() and meta.read_text() == expected and all(p.is_file() for p in files.values()):
         return files
     return write_assets(params, directory)

@@ -35,7 +35,9 @@ def _targets(n_steps: int) -> list[GripperTarget]:
         blend = 3 * s * s - 2 * s**3
         p = start + blend * np.array([0.1, 0.05, -0.05])
         out.append(
-            GripperTarget(p_world=p, quat_world=euler_to_quat(blend * np.radians(95), 0.0, 0.0), jaw_sep_m=0.04)
+            GripperTarget(
+                p_world=p, quat_world=euler_to_quat(blend * np.radians(95), 0.0, 0.0), jaw_sep_m=0.04
+            )
         )
     return out
 
@@ -88,7 +90,7 @@ def bench_controller(
         "raw_step_us_median": raw / steps * 1e6,
         "loop_step_us_median": loop / steps * 1e6,
         # Median of paired ratios: each repetition's loop and replay ran back to back.
-        "overhead_ratio": statistics.median(a / b for a, b in zip(loop_times, raw_times)) - 1.0,
+        "overhead_ratio": statistics.median(a / b for a, b in zip(loop_times, raw_times, strict=True)) - 1.0,
         "solve_time_us_median": float(np.median(solve) * 1e6),
         "solve_time_us_p99": float(np.percentile(solve, 99) * 1e6),
         "control_period_us": sim.controller.control_dt * 1e6,
@@ -109,7 +111,11 @@ def run_benchmarks(
         for dt in control_dts or [None]:
             entries.append(bench_controller(c, n_steps=n_steps, repeats=repeats, control_dt=dt))
     results = {
-        "machine": {"python": platform.python_version(), "mujoco": mujoco.__version__, "cpu": platform.machine()},
+        "machine": {
+            "python": platform.python_version(),
+            "mujoco": mujoco.__version__,
+            "cpu": platform.machine(),
+        },
         "method": "closed loop vs replay of its own control sequence with bare mj_step; "
         "alternating repetitions, medians of CPU time",
         "target": "overhead_ratio <= 0.05",

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 __all__ = ["main"]
 
@@ -72,7 +72,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     )
     for r in results["controllers"]:
         print(
-            f"{r['controller']:>10} @ {1.0 / r['control_period_us'] * 1e6:5.0f} Hz: physics {r['raw_step_us_median']:.1f} us/step, with controller "
+            f"{r['controller']:>10} @ {1e6 / r['control_period_us']:5.0f} Hz: "
+            f"physics {r['raw_step_us_median']:.1f} us/step, with controller "
             f"{r['loop_step_us_median']:.1f} us/step, overhead {100 * r['overhead_ratio']:+.1f} %, "
             f"solve median {r['solve_time_us_median']:.1f} us (p99 {r['solve_time_us_p99']:.1f} us)"
         )

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -76,7 +76,8 @@ class GripperTarget:
 
     def __post_init__(self) -> None:
         for name, size in (("p_world", 3), ("quat_world", 4), ("v_world", 3), ("omega_body", 3)):
-            value = np.asarray(getattr(self, name), dtype=float)
+            value = np.array(getattr(self, name), dtype=float)  # a private, read-only copy
+            value.setflags(write=False)
             if value.shape != (size,):
                 raise ValueError(f"GripperTarget.{name} must have shape ({size},), got {value.shape}")
             if not np.all(np.isfinite(value)):
@@ -129,10 +130,8 @@ def command_to_target(u: Sequence[float], *, frame: TaskFrame = WORLD) -> Grippe
     """
     values = np.asarray(u, dtype=float).reshape(-1)
     if values.shape != (7,):
-        raise ValueError(
-            f"command must have 7 entries {list(COMMAND_FIELDS)}, got {values.shape[0]}"
-        )
-    for name, value in zip(COMMAND_FIELDS, values):
+        raise ValueError(f"command must have 7 entries {list(COMMAND_FIELDS)}, got {values.shape[0]}")
+    for name, value in zip(COMMAND_FIELDS, values, strict=True):
         if not math.isfinite(value):
             raise ValueError(f"command entry {name!r} must be finite, got {value!r}")
     _check_jaw(float(values[6]))

@@ -10,9 +10,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
-from typing import Callable
 
 import mujoco
 import numpy as np
@@ -119,9 +119,7 @@ def _copy_without_gravity(model: mujoco.MjModel) -> mujoco.MjModel:
     return model
 
 
-def fit(
-    bytes_: NDArray[np.float64], sep_m: NDArray[np.float64], *, n_knots: int = 52
-) -> JawCalibration:
+def fit(bytes_: NDArray[np.float64], sep_m: NDArray[np.float64], *, n_knots: int = 52) -> JawCalibration:
     """Piecewise-linear fit through ``n_knots`` of the measured points (both ends included).
 
     The reported ``fit_max_error_m`` is the worst error over *all* measured points, so it
@@ -145,7 +143,5 @@ def calibrate(model: mujoco.MjModel, *, n_samples: int = 103, n_knots: int = 52)
 
     reader = StateReader(model)
     bytes_ = np.linspace(0.0, BYTE_MAX, n_samples)
-    sep = measure(
-        model, bytes_=bytes_, sep_of=reader.jaw_sep_m, jaw_actuator=model.actuator(JAW_ACTUATOR).id
-    )
+    sep = measure(model, bytes_=bytes_, sep_of=reader.jaw_sep_m, jaw_actuator=model.actuator(JAW_ACTUATOR).id)
     return fit(bytes_, sep, n_knots=n_knots)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -138,6 +139,9 @@ def _add_table(spec: mujoco.MjSpec) -> None:
     table.type = mujoco.mjtGeom.mjGEOM_PLANE
     table.size = [1.0, 1.0, 0.05]
     table.material = "table"
+    # Not given by SPEC; as stiff as the peg's own contact so a dropped peg does not sink in.
+    table.solref = [0.005, 1.0]
+    table.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
 
 
 def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> None:
@@ -165,10 +169,9 @@ def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) ->
         geom.density = cfg.block_density
         geom.friction = list(cfg.block_friction)
         geom.condim = 6
-        # margin = gap: contacts are detected 1 mm early but produce force only on penetration,
-        # so the effective hole clearance is the geometric one.
-        geom.margin = 0.001
-        geom.gap = 0.001
+        # Contacts turn active within the margin; the hole is widened by the same amount
+        # (AssetParams.contact_margin) so the effective clearance is the stated one.
+        geom.margin = cfg.assets.contact_margin
         geom.solref = [0.01, 1.0]
         geom.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
         geom.rgba = [0.55, 0.42, 0.30, 0.4]
@@ -212,7 +215,7 @@ def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     root.mass = 0.1
     root.inertia = [0.01, 0.01, 0.01]
     root.explicitinertial = True
-    for name, axis in zip(SLIDE_JOINTS, np.eye(3)):
+    for name, axis in zip(SLIDE_JOINTS, np.eye(3), strict=True):
         joint = root.add_joint()
         joint.name = name
         joint.type = mujoco.mjtJoint.mjJNT_SLIDE
@@ -239,14 +242,14 @@ def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     # The child's tendon, equalities, excludes and actuator come along with the attached body.
 
     gear_axes = np.eye(3)
-    for name, joint_name in zip(SLIDE_ACTUATORS, SLIDE_JOINTS):
+    for name, joint_name in zip(SLIDE_ACTUATORS, SLIDE_JOINTS, strict=True):
         act = spec.add_actuator()
         act.name = name
         act.target = joint_name
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         act.ctrlrange = [-cfg.slide_force_limit, cfg.slide_force_limit]
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    for name, axis in zip(BALL_ACTUATORS, gear_axes):
+    for name, axis in zip(BALL_ACTUATORS, gear_axes, strict=True):
         act = spec.add_actuator()
         act.name = name
         act.target = BALL_JOINT
@@ -296,7 +299,7 @@ def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
 
 def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel, cfg: SceneConfig) -> None:
     qpos = model.qpos0.copy()
-    for name, value in zip(SLIDE_JOINTS, cfg.gripper_home):
+    for name, value in zip(SLIDE_JOINTS, cfg.gripper_home, strict=True):
         qpos[model.joint(name).qposadr[0]] = value
     ball = model.joint(BALL_JOINT).qposadr[0]
     qpos[ball : ball + 4] = [1.0, 0.0, 0.0, 0.0]
@@ -333,6 +336,28 @@ def build_model(cfg: SceneConfig | None = None) -> mujoco.MjModel:
     return build_spec(cfg).compile()
 
 
+def _restore_explicit_inertials(spec: mujoco.MjSpec, root: Any) -> None:
+    """Re-add ``<inertial>`` elements that ``MjSpec.to_xml`` drops for some bodies.
+
+    Seen with MuJoCo 4.0: a body whose inertial was set through the spec API (``gripper_root``)
+    is written without it, which would silently change its mass.
+    """
+    import xml.etree.ElementTree as ET
+
+    by_name = {b.get("name"): b for b in root.iter("body")}
+    for body in spec.bodies:
+        elem = by_name.get(body.name)
+        if elem is None or not body.explicitinertial or elem.find("inertial") is not None:
+            continue
+        inertial = ET.Element(
+            "inertial",
+            pos=" ".join(repr(float(v)) for v in body.ipos),
+            mass=repr(float(body.mass)),
+            diaginertia=" ".join(repr(float(v)) for v in body.inertia),
+        )
+        elem.insert(0, inertial)
+
+
 def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
     """Write ``out_dir/scene.xml`` plus its meshes under ``out_dir/meshes``.
 
@@ -353,6 +378,7 @@ def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
         dst_name = (elem.get("name") or Path(src).stem).replace("/", "_") + Path(src).suffix
         shutil.copyfile(src, mesh_dir / dst_name)
         elem.set("file", dst_name)
+    _restore_explicit_inertials(spec, root)
     compiler = root.find("compiler")
     if compiler is None:
         compiler = ET.Element("compiler")

@@ -11,7 +11,7 @@ import math
 import mujoco
 import numpy as np
 
-from controllers.base import ControlOutput, Controller
+from controllers.base import Controller, ControlOutput
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.scene import HOME_KEY
 from peg_ctrl.state import ControlState, StateReader

@@ -49,7 +49,8 @@ class PairContact:
 
     ``force_world`` (3,) [N] is the force the second group exerts on the first, summed over
     ``count`` contacts; ``position_world`` (3,) [m] is their force-weighted centroid;
-    ``max_penetration_m`` the deepest penetration among them.
+    ``max_penetration_m`` the deepest penetration among them, measured from where the contact
+    turns active (the geoms' margin), i.e. the depth the soft contact is compressed.
     """
 
     pair: tuple[str, str]
@@ -176,16 +177,14 @@ class StateReader:
             entry[1] += mag * con.pos
             entry[2] += mag
             entry[3] += 1
-            entry[4] = max(entry[4], -float(con.dist))
+            entry[4] = max(entry[4], con.includemargin - float(con.dist))
         out = []
         for pair in sorted(sums):
             force, weighted_pos, total, count, pen = sums[pair]
             magnitude = float(np.linalg.norm(force))
             if total < self.contact_threshold_n:
                 continue
-            out.append(
-                PairContact(pair, force, magnitude, weighted_pos / total, count, max(pen, 0.0))
-            )
+            out.append(PairContact(pair, force, magnitude, weighted_pos / total, count, max(pen, 0.0)))
         return tuple(out)
 
     def sim_state(self, data: mujoco.MjData) -> SimState:

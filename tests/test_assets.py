@@ -20,7 +20,11 @@ from peg_ctrl.assets import (
 )
 from peg_ctrl.scene import SceneConfig, build_model
 
-PARAMS = [AssetParams(), AssetParams(clearance=0.0002, chamfer=0.002), AssetParams(n_parts=6, clearance=0.004)]
+PARAMS = [
+    AssetParams(),
+    AssetParams(clearance=0.0002, chamfer=0.002),
+    AssetParams(n_parts=6, clearance=0.004),
+]
 
 
 def _block_minus_hole_volume(p: AssetParams) -> float:
@@ -39,7 +43,7 @@ def test_same_parameters_give_identical_bytes(tmp_path: Path) -> None:
 
 def test_committed_default_assets_match_the_generator(tmp_path: Path) -> None:
     fresh = write_assets(AssetParams(), tmp_path)
-    for name, path in fresh.items():
+    for _name, path in fresh.items():
         committed = default_assets_dir() / path.name
         assert filecmp.cmp(path, committed, shallow=False), f"{committed} is stale; regenerate"
 
@@ -103,11 +107,23 @@ def test_measured_clearance_between_peg_and_hole(clearance: float) -> None:
     parts = [model.geom(f"object_{i + 1:02d}").id for i in range(cfg.assets.n_parts)]
     fromto = np.zeros(6)
     dists = [mujoco.mj_geomDistance(model, data, peg, g, 0.05, fromto) for g in parts]
-    assert min(dists) == pytest.approx(clearance, abs=2e-6)
-    # Shift the peg sideways by more than the clearance: it now overlaps a part.
-    data.qpos[adr] += clearance + 0.0005
+    margin = cfg.assets.contact_margin
+    # Geometric gap = clearance + contact margin; contact forces start at `margin`.
+    assert min(dists) - margin == pytest.approx(clearance, abs=2e-6)
+
+    # The peg spans the whole hole depth. Centred, no peg-block contact is active; shifted
+    # sideways by more than the clearance, one is.
+    def active_block_contacts() -> int:
+        return sum(
+            1
+            for c in data.contact[: data.ncon]
+            if c.efc_address >= 0 and {c.geom1, c.geom2} & {peg} and {c.geom1, c.geom2} & set(parts)
+        )
+
+    assert active_block_contacts() == 0
+    data.qpos[adr] += clearance + 0.0003
     mujoco.mj_forward(model, data)
-    assert min(mujoco.mj_geomDistance(model, data, peg, g, 0.05, fromto) for g in parts) < 0
+    assert active_block_contacts() > 0
 
 
 @pytest.mark.parametrize(

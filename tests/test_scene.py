@@ -21,7 +21,7 @@ from peg_ctrl.scene import (
 
 
 def test_slide_joints(model: mujoco.MjModel) -> None:
-    for name, axis in zip(SLIDE_JOINTS, np.eye(3)):
+    for name, axis in zip(SLIDE_JOINTS, np.eye(3), strict=True):
         j = model.joint(name)
         assert j.type[0] == mujoco.mjtJoint.mjJNT_SLIDE
         np.testing.assert_array_equal(j.axis, axis)
@@ -48,11 +48,11 @@ def test_gripper_root_inertial(model: mujoco.MjModel) -> None:
 
 
 def test_actuators(model: mujoco.MjModel) -> None:
-    for name, joint in zip(SLIDE_ACTUATORS, SLIDE_JOINTS):
+    for name, joint in zip(SLIDE_ACTUATORS, SLIDE_JOINTS, strict=True):
         a = model.actuator(name)
         assert a.trnid[0] == model.joint(joint).id
         assert a.gear[0] == 1.0
-    for name, axis in zip(BALL_ACTUATORS, np.eye(3)):
+    for name, axis in zip(BALL_ACTUATORS, np.eye(3), strict=True):
         a = model.actuator(name)
         assert a.trnid[0] == model.joint(BALL_JOINT).id
         np.testing.assert_array_equal(a.gear[:3], axis)
@@ -115,7 +115,9 @@ def test_home_pose(model: mujoco.MjModel) -> None:
     mujoco.mj_forward(model, data)
     np.testing.assert_allclose(data.site(GRIPPER_PREFIX + "pinch").xpos, [-0.2, 0.0, 0.2], atol=1e-12)
     # Fingers point down: the pinch site's approach axis (+Z) is world -Z.
-    np.testing.assert_allclose(data.site(GRIPPER_PREFIX + "pinch").xmat.reshape(3, 3)[:, 2], [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(
+        data.site(GRIPPER_PREFIX + "pinch").xmat.reshape(3, 3)[:, 2], [0, 0, -1], atol=1e-12
+    )
     # Peg lying on the table, its axis along world Y.
     np.testing.assert_allclose(abs(data.body("peg").xmat.reshape(3, 3)[1, 2]), 1.0, atol=1e-12)
 

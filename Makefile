@@ -1,0 +1,46 @@
+# Common commands. Each target creates its own virtual environment in .venv on first use.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    ?= runs/demo
+
+.PHONY: install demo test test-slow lint bench model calibrate clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $@
+
+install: $(STAMP)
+
+## demo: install, then run the main job
+demo: $(STAMP)
+	$(BIN)/peg-sim model --out $(OUT)/model
+	$(BIN)/peg-sim bench --out $(OUT)/bench.json
+
+## test: install, lint, type-check and run the default (fast) test suite
+test: $(STAMP) lint
+	$(BIN)/python -m pytest -q
+
+## test-slow: the long physics runs only
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -m slow
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+
+bench: $(STAMP)
+	$(BIN)/peg-sim bench --out $(OUT)/bench.json --control-dt 0.001 --control-dt 0.002 --control-dt 0.005
+
+model: $(STAMP)
+	$(BIN)/peg-sim model --out $(OUT)/model
+
+calibrate: $(STAMP)
+	$(BIN)/peg-sim calibrate
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache
