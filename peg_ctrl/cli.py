@@ -7,6 +7,7 @@ traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -14,7 +15,6 @@ from pathlib import Path
 __all__ = ["main"]
 
 _PENDING = {
-    "run": "run one autonomous episode headless (state machine, planners, logs, plot, video)",
     "teleop": "drive the gripper from the keyboard in a MuJoCo viewer window",
     "sweep": "run an experiment file: controllers x seeds x randomisation, in parallel",
 }
@@ -81,6 +81,67 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.episode import episode_config_from_mapping, run_episode
+
+    data = read_mapping(Path(args.config)) if args.config else {}
+    # Command-line flags override the file.
+    if args.controller is not None:
+        ctrl = data.get("controller")
+        if isinstance(ctrl, dict) and ctrl.get("name", args.controller) == args.controller:
+            data["controller"] = {**ctrl, "name": args.controller}
+        else:
+            data["controller"] = {"name": args.controller}
+    if args.planner is not None:
+        data["planner"] = args.planner
+    if args.seed is not None:
+        data["seed"] = args.seed
+    if args.randomize:
+        data["randomization"] = {**data.get("randomization", {}), "enabled": True}
+    if args.max_steps is not None:
+        data["max_steps"] = args.max_steps
+    cfg = episode_config_from_mapping(data)
+    out = Path(args.out)
+    if args.viewer:
+        result = _run_with_viewer(cfg, out)
+    else:
+        result = run_episode(cfg, out, video=args.video)
+    print(result.one_line())
+    print(f"wrote {out / 'summary.json'}")
+    return 0 if result.status == "success" else 1
+
+
+def _run_with_viewer(cfg, out: Path):  # type: ignore[no-untyped-def]
+    import time
+
+    import mujoco.viewer
+
+    from peg_ctrl.episode import run_episode
+
+    handle: dict[str, object] = {}
+    wall0 = time.perf_counter()
+
+    def sync(model, data) -> None:  # type: ignore[no-untyped-def]
+        viewer = handle.get("viewer")
+        if viewer is None:
+            viewer = mujoco.viewer.launch_passive(model, data)
+            handle["viewer"] = viewer
+        if not viewer.is_running():  # type: ignore[attr-defined]
+            raise KeyboardInterrupt
+        viewer.sync()  # type: ignore[attr-defined]
+        lag = data.time - (time.perf_counter() - wall0)
+        if lag > 0:
+            time.sleep(lag)  # real-time pacing
+
+    try:
+        return run_episode(cfg, out, on_step=sync)
+    finally:
+        viewer = handle.get("viewer")
+        if viewer is not None:
+            viewer.close()  # type: ignore[attr-defined]
+
+
 def _pending(name: str) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
         raise UsageError(f"'{name}' is not available in this version yet")
@@ -116,6 +177,24 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_bench)
 
+    p = sub.add_parser(
+        "run",
+        help="run one autonomous episode headless: summary, logs, force plot (and video)",
+        description="Run one autonomous episode (grasp, lift, turn, align, release, settle) and write "
+        "DIR/summary.json, DIR/log.jsonl, DIR/forces.npz, DIR/force_profile.png (and DIR/episode.mp4). "
+        "Exit code 0 on success, 1 on a failed episode, 2 on bad input.",
+    )
+    p.add_argument("--controller", help="controller name (default pd, or the config file's)")
+    p.add_argument("--planner", help="ruckig (default) or fixed_speed")
+    p.add_argument("--seed", type=int, help="random seed for the initial conditions (default 0)")
+    p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose from the seed")
+    p.add_argument("--max-steps", type=int, help="physics step limit (default 20000)")
+    p.add_argument("--out", default="runs/episode", help="output directory (default runs/episode)")
+    p.add_argument("--video", action="store_true", help="also render DIR/episode.mp4 offscreen")
+    p.add_argument("--viewer", action="store_true", help="show the episode in the MuJoCo viewer instead")
+    p.add_argument("--config", help="episode config file (.yaml, .toml or .json)")
+    p.set_defaults(func=_cmd_run)
+
     for name, text in _PENDING.items():
         p = sub.add_parser(name, help=f"{text} (coming in a later version)")
         p.set_defaults(func=_pending(name))
@@ -125,6 +204,9 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
+    if not os.environ.get("DISPLAY") and not getattr(args, "viewer", False):
+        # Offscreen rendering without a window system; must be set before mujoco is imported.
+        os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         return int(args.func(args))
     except (UsageError, ValueError, FileNotFoundError) as exc:

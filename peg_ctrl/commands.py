@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import mujoco
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "JAW_SEP_MAX_M",
@@ -92,6 +92,33 @@ class GripperTarget:
                 f"GripperTarget.p_world {self.p_world.tolist()} is outside the slide range "
                 f"[-{POSITION_LIMIT_M}, {POSITION_LIMIT_M}] m"
             )
+
+    @classmethod
+    def trusted(
+        cls,
+        p_world: ArrayLike,
+        quat_world: ArrayLike,
+        v_world: ArrayLike,
+        omega_body: ArrayLike,
+        jaw_sep_m: float,
+    ) -> GripperTarget:
+        """Build without validation, for planners whose samples are finite by construction.
+
+        Planners sample at the control rate, where the checks of ``__init__`` would cost more
+        than the controller; every controller still rejects a non-finite result.
+        """
+        obj = object.__new__(cls)
+        for name, value in (
+            ("p_world", p_world),
+            ("quat_world", quat_world),
+            ("v_world", v_world),
+            ("omega_body", omega_body),
+        ):
+            arr = np.array(value, dtype=float)
+            arr.setflags(write=False)
+            object.__setattr__(obj, name, arr)
+        object.__setattr__(obj, "jaw_sep_m", float(jaw_sep_m))
+        return obj
 
     @classmethod
     def from_pose(

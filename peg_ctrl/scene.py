@@ -45,6 +45,7 @@ __all__ = [
     "PINCH_SITE",
     "GRIPPER_PREFIX",
     "HOME_KEY",
+    "contact_sensor_name",
 ]
 
 SLIDE_JOINTS = ("gripper_transX", "gripper_transY", "gripper_transZ")
@@ -260,6 +261,8 @@ def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
 
 
 def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
     light = spec.worldbody.add_light()
     light.pos = [0.0, -0.3, 1.2]
     light.dir = [0.0, 0.2, -1.0]
@@ -267,9 +270,10 @@ def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     hx, hy = cfg.hole_xy
     cam = spec.worldbody.add_camera()
     cam.name = "insertion"
-    # Look at a point just above the hole from the front-right.
-    target = np.array([hx - 0.05, hy, 0.06])
-    eye = np.array([hx + 0.25, hy - 0.45, 0.30])
+    # Look at the hole mouth from the side the fingers point to after the turn (+Y), so the
+    # gripper's body (towards -Y) does not hide the insertion.
+    target = np.array([hx - 0.02, hy, 0.06])
+    eye = np.array([hx + 0.20, hy + 0.30, 0.20])
     forward = target - eye
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, [0.0, 0.0, 1.0])
@@ -295,6 +299,49 @@ def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     mujoco.mju_mat2Quat(quat, np.column_stack([right, up, -forward]).flatten())
     overview.quat = list(quat)
     overview.fovy = 45.0
+
+
+# How each body group is named to a contact sensor: (object type, name).
+_GROUP_OBJECTS = {
+    "gripper": (mujoco.mjtObj.mjOBJ_XBODY, "gripper_root"),  # the whole subtree
+    "peg": (mujoco.mjtObj.mjOBJ_BODY, "peg"),
+    "block": (mujoco.mjtObj.mjOBJ_BODY, "block"),
+    "table": (mujoco.mjtObj.mjOBJ_GEOM, "table"),
+}
+_CON_FOUND, _CON_FORCE, _CON_DIST = 1, 2, 8  # mjtConDataField bits
+_REDUCE_MINDIST, _REDUCE_NETFORCE = 1, 3
+
+
+def contact_sensor_name(kind: str, first: str, second: str) -> str:
+    """Name of the ``kind`` ("force" or "dist") contact sensor between two body groups."""
+    return f"contact_{kind}/{first}-{second}"
+
+
+def _add_contact_sensors(spec: mujoco.MjSpec) -> None:
+    """Net contact force per body-group pair and the closest contact on the peg, computed in C.
+
+    A ``force`` sensor for the pair (first, second) reports the net force [N] that ``second``
+    exerts on ``first`` in the world frame (MuJoCo reports object 1's force on object 2).
+    """
+    groups = list(_GROUP_OBJECTS)
+    pairs = sorted(tuple(sorted((a, b))) for i, a in enumerate(groups) for b in groups[i + 1 :])
+    for first, second in pairs:
+        if {first, second} == {"block", "table"}:
+            continue  # both static: MuJoCo never collides them
+        sensor = spec.add_sensor()
+        sensor.name = contact_sensor_name("force", first, second)
+        sensor.type = mujoco.mjtSensor.mjSENS_CONTACT
+        sensor.objtype, sensor.objname = _GROUP_OBJECTS[second]
+        sensor.reftype, sensor.refname = _GROUP_OBJECTS[first]
+        sensor.intprm = [_CON_FOUND | _CON_FORCE, _REDUCE_NETFORCE, 1]
+    for other in ("block", "gripper", "table"):
+        first, second = sorted(("peg", other))
+        sensor = spec.add_sensor()
+        sensor.name = contact_sensor_name("dist", first, second)
+        sensor.type = mujoco.mjtSensor.mjSENS_CONTACT
+        sensor.objtype, sensor.objname = _GROUP_OBJECTS["peg"]
+        sensor.reftype, sensor.refname = _GROUP_OBJECTS[other]
+        sensor.intprm = [_CON_FOUND | _CON_DIST, _REDUCE_MINDIST, 1]
 
 
 def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel, cfg: SceneConfig) -> None:
@@ -326,6 +373,7 @@ def build_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
     _add_peg(spec, cfg, files)
     _add_gripper(spec, cfg)
     _add_cameras_and_lights(spec, cfg)
+    _add_contact_sensors(spec)
     model = spec.compile()
     _add_home_key(spec, model, cfg)
     return spec

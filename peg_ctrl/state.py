@@ -20,11 +20,16 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, SLIDE_JOINTS
+from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, SLIDE_JOINTS, contact_sensor_name
 
-__all__ = ["ControlState", "PairContact", "SimState", "StateReader", "BODY_GROUPS"]
+__all__ = ["ControlState", "PairContact", "SimState", "StateReader", "BODY_GROUPS", "PAIRS", "PEG_PARTNERS"]
 
 BODY_GROUPS = ("gripper", "peg", "block", "table")
+# Every unordered pair of distinct groups, names in alphabetical order (the order used in logs).
+PAIRS: tuple[tuple[str, str], ...] = tuple(
+    sorted((min(a, b), max(a, b)) for i, a in enumerate(BODY_GROUPS) for b in BODY_GROUPS[i + 1 :])
+)
+PEG_PARTNERS = ("block", "gripper", "table")  # groups the peg's penetration is tracked against
 
 
 class ControlState(NamedTuple):
@@ -119,6 +124,23 @@ class StateReader:
         # Box half-thickness along the closing direction (local y of the pad boxes).
         self._pad_half_sum = float(sum(model.geom_size[g][1] for g in self._pads))
         self._body_group = self._classify_bodies(model)
+        # Contact sensors of the scene (see scene._add_contact_sensors).
+        self._force_sensors: list[tuple[int, int]] = []
+        for k, (a, b) in enumerate(PAIRS):
+            sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, contact_sensor_name("force", a, b))
+            if sid >= 0:
+                self._force_sensors.append((k, int(model.sensor_adr[sid])))
+        self._dist_sensors: list[tuple[int, int, float]] = []
+        peg_margin = float(model.geom_margin[model.geom("peg").id])
+        for k, other in enumerate(PEG_PARTNERS):
+            a, b = sorted(("peg", other))
+            sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, contact_sensor_name("dist", a, b))
+            if sid < 0:
+                continue
+            geoms = np.flatnonzero(self._body_group[model.geom_bodyid] == BODY_GROUPS.index(other))
+            # MuJoCo uses the larger margin of the two geoms; take the group's largest.
+            margin = max(peg_margin, float(model.geom_margin[geoms].max()) if len(geoms) else 0.0)
+            self._dist_sensors.append((k, int(model.sensor_adr[sid]), margin))
 
     @staticmethod
     def _classify_bodies(model: mujoco.MjModel) -> NDArray[np.int64]:
@@ -186,6 +208,22 @@ class StateReader:
                 continue
             out.append(PairContact(pair, force, magnitude, weighted_pos / total, count, max(pen, 0.0)))
         return tuple(out)
+
+    def pair_forces(self, data: mujoco.MjData) -> tuple[list[float], list[float]]:
+        """Net contact force magnitude per pair of :data:`PAIRS` [N], and the deepest active
+        penetration [m] of the peg's contacts with each of :data:`PEG_PARTNERS`, read from the
+        scene's contact sensors (computed in C during the step: cheap enough for every step).
+        """
+        sd = data.sensordata.tolist()
+        mags = [0.0] * len(PAIRS)
+        for k, adr in self._force_sensors:
+            fx, fy, fz = sd[adr + 1], sd[adr + 2], sd[adr + 3]
+            mags[k] = math.sqrt(fx * fx + fy * fy + fz * fz)
+        pens = [0.0] * len(PEG_PARTNERS)
+        for k, adr, margin in self._dist_sensors:
+            if sd[adr] > 0.0:
+                pens[k] = max(0.0, margin - sd[adr + 1])
+        return mags, pens
 
     def sim_state(self, data: mujoco.MjData) -> SimState:
         pq = data.qpos[self._peg_q : self._peg_q + 7].copy()

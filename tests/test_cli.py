@@ -47,7 +47,11 @@ def test_bench_writes_json(tmp_path: Path) -> None:
         (["bench", "--steps", "5"], "--steps must be >= 100"),
         (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
-        (["run"], "'run' is not available"),
+        (["teleop"], "'teleop' is not available"),
+        (["run", "--controller", "nope"], "unknown controller 'nope'; known: pd"),
+        (["run", "--planner", "warp"], "unknown planner 'warp'; known: fixed_speed, ruckig"),
+        (["run", "--seed", "-3"], "seed must be >= 0"),
+        (["run", "--config", "missing.yaml"], "does not exist"),
     ],
 )
 def test_user_errors_are_one_line_with_exit_2(argv, message, tmp_path: Path) -> None:

@@ -1,0 +1,158 @@
+"""Episode logging that never stalls the simulation loop.
+
+The loop hands records to a :class:`EpisodeLogger`, which queues them for a background writer
+thread. The writer serialises and writes them and flushes whenever the queue runs dry, so a
+crash or Ctrl-C leaves readable files up to the last flush:
+
+- ``log.jsonl`` — one JSON object per line: ``{"event": "step", ...}`` every ``interval`` steps
+  with the SPEC §7 fields, ``{"event": "phase", ...}`` when a phase ends, ``{"event": "end", ...}``
+  with the episode record;
+- ``forces.csv`` — the full-rate force trace: time, phase and the net contact force of every
+  body-group pair at each control step (converted to ``forces.npz`` when the episode ends).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import queue
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from peg_ctrl.state import PAIRS
+
+__all__ = ["EpisodeLogger", "TRACE_COLUMNS", "read_log", "read_trace", "STEP_FIELDS"]
+
+TRACE_COLUMNS = ("t", "phase", *("-".join(p) for p in PAIRS), "peg_penetration_m")
+
+# Required fields of a step record (dotted paths), SPEC §7.
+STEP_FIELDS = (
+    "step",
+    "t",
+    "phase",
+    "command.position",
+    "command.omega_body",
+    "command.jaw_sep_m",
+    "gripper.position",
+    "gripper.euler",
+    "gripper.quat",
+    "gripper.jaw_sep_m",
+    "peg.position",
+    "peg.quat",
+    "contacts",
+)
+
+_STOP = object()
+
+
+class EpisodeLogger:
+    """Queue-fed writer of ``log.jsonl`` and ``forces.csv`` in ``out_dir``."""
+
+    def __init__(self, out_dir: Path, *, trace_chunk: int = 250) -> None:
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.log_path = self.out_dir / "log.jsonl"
+        self.trace_path = self.out_dir / "forces.csv"
+        self.npz_path = self.out_dir / "forces.npz"
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._trace_rows: list[Sequence[float]] = []
+        self._trace_chunk = trace_chunk
+        self._error: BaseException | None = None
+        self._log_file = open(self.log_path, "w", encoding="utf-8")  # noqa: SIM115 (closed by the writer)
+        self._trace_file = open(self.trace_path, "w", newline="", encoding="utf-8")  # noqa: SIM115
+        csv.writer(self._trace_file).writerow(TRACE_COLUMNS)
+        self._thread = threading.Thread(target=self._run, name="episode-log-writer", daemon=True)
+        self._thread.start()
+        self._closed = False
+
+    # -- producer side (the simulation loop) -----------------------------------------------
+    def record(self, entry: dict[str, Any]) -> None:
+        """Queue one JSON record (serialised on the writer thread)."""
+        self._queue.put(("json", entry))
+
+    def trace(self, row: Sequence[float]) -> None:
+        """Append one row of :data:`TRACE_COLUMNS` (buffered, handed over in chunks)."""
+        self._trace_rows.append(row)
+        if len(self._trace_rows) >= self._trace_chunk:
+            self._queue.put(("trace", self._trace_rows))
+            self._trace_rows = []
+
+    def close(self, end_record: dict[str, Any] | None = None) -> None:
+        """Flush everything, write the end record and ``forces.npz``, stop the writer."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._trace_rows:
+            self._queue.put(("trace", self._trace_rows))
+            self._trace_rows = []
+        if end_record is not None:
+            self._queue.put(("json", end_record))
+        self._queue.put(_STOP)
+        self._thread.join()
+        if self._error is not None:
+            raise RuntimeError(f"log writer failed: {self._error}") from self._error
+        trace = read_trace(self.trace_path)
+        np.savez_compressed(self.npz_path, columns=np.array(TRACE_COLUMNS), data=trace)
+
+    # -- consumer side (writer thread) ------------------------------------------------------
+    def _run(self) -> None:
+        writer = csv.writer(self._trace_file)
+        try:
+            while True:
+                item = self._queue.get()
+                while True:
+                    if item is _STOP:
+                        self._flush()
+                        return
+                    kind, payload = item
+                    if kind == "json":
+                        self._log_file.write(json.dumps(payload, separators=(",", ":")) + "\n")
+                    else:
+                        writer.writerows(payload)
+                    try:
+                        item = self._queue.get_nowait()
+                    except queue.Empty:
+                        break
+                self._flush()  # the queue ran dry: make what we have durable
+        except BaseException as exc:  # reported by close()
+            self._error = exc
+        finally:
+            self._log_file.close()
+            self._trace_file.close()
+
+    def _flush(self) -> None:
+        self._log_file.flush()
+        self._trace_file.flush()
+
+
+def read_log(path: Path) -> list[dict[str, Any]]:
+    """All complete records of a ``log.jsonl`` (a torn last line, from a kill, is skipped)."""
+    records = []
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            if not line.endswith("\n"):
+                break
+            records.append(json.loads(line))
+    return records
+
+
+def read_trace(path: Path) -> np.ndarray:
+    """The force trace as an array (n, len(TRACE_COLUMNS)); a torn last row is skipped."""
+    rows = []
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None:
+            return np.zeros((0, len(TRACE_COLUMNS)))
+        for row in reader:
+            if len(row) != len(TRACE_COLUMNS):
+                break
+            try:
+                rows.append([float(v) for v in row])
+            except ValueError:
+                break
+    return np.asarray(rows, dtype=float).reshape(-1, len(TRACE_COLUMNS))
