@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
 
-.PHONY: install demo test test-slow lint bench model calibrate clean
+.PHONY: install demo sysdeps test test-slow lint bench model calibrate clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,13 +15,19 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-## demo: install, then run the main job
-demo: $(STAMP)
-	$(BIN)/peg-sim model --out $(OUT)/model
-	$(BIN)/peg-sim bench --out $(OUT)/bench.json
+## demo: install, then run the main job: one autonomous episode, headless, with log, plot, video
+demo: $(STAMP) sysdeps
+	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
+	$(BIN)/peg-sim bench --out $(OUT)/bench.json --steps 3000 --repeats 5
+
+## sysdeps: the EGL/Mesa libraries for offscreen rendering, installed only if missing (needs root)
+sysdeps:
+	@ldconfig -p | grep -q 'libEGL.so.1' && ldconfig -p | grep -q 'libGL.so.1' || { \
+	  echo "installing EGL/Mesa for offscreen rendering"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1 libgl1-mesa-dri >/dev/null; }
 
 ## test: install, lint, type-check and run the default (fast) test suite
-test: $(STAMP) lint
+test: $(STAMP) sysdeps lint
 	$(BIN)/python -m pytest -q
 
 ## test-slow: the long physics runs only

@@ -97,6 +97,78 @@ def bench_controller(
     }
 
 
+def bench_episode(
+    *, controller: str = "pd", planner: str = "ruckig", seed: int = 0, repeats: int = 3
+) -> dict[str, Any]:
+    """A whole autonomous episode (controller + state machine + planner + logging) vs raw physics.
+
+    Each repetition runs the episode three ways on the same steps: with full logging, with
+    logging off (no trace, no step records), and as a bare ``mj_step`` replay of the episode's
+    own controls. ``logging_share`` is the part of the loop overhead that logging accounts for.
+    """
+    import dataclasses
+    import tempfile
+
+    from peg_ctrl.episode import (
+        ControllerSpec,
+        EpisodeConfig,
+        LogConfig,
+        RandomizationConfig,
+        initial_qpos,
+        run_episode,
+    )
+
+    cfg = EpisodeConfig(
+        controller=ControllerSpec(controller),
+        planner=planner,
+        seed=seed,
+        randomization=RandomizationConfig(enabled=True),
+    )
+    quiet = dataclasses.replace(cfg, log=LogConfig(interval=10**9, trace=False))
+    model = build_model(cfg.scene)
+    full_t, quiet_t, raw_t = [], [], []
+    steps = 0
+    status = ""
+    for _ in range(repeats):
+        ctrls: list[np.ndarray] = []
+        decimation = [1]
+
+        def record(m: mujoco.MjModel, d: mujoco.MjData, ctrls: list[np.ndarray] = ctrls) -> None:
+            ctrls.append(d.ctrl.copy())
+
+        with tempfile.TemporaryDirectory() as tmp:
+            # Wall time of the loop itself (the writer thread works concurrently).
+            result = run_episode(cfg, Path(tmp) / "full", plot=False)
+            full_t.append(result.wall_time_s)
+            quiet_t.append(run_episode(quiet, Path(tmp) / "quiet", plot=False, on_step=record).wall_time_s)
+        steps, status = result.total_timesteps, result.status
+        decimation[0] = steps // max(1, len(ctrls))
+        data = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+        data.qpos[:] = initial_qpos(model, cfg)
+        mujoco.mj_forward(model, data)
+        t0 = time.perf_counter()
+        for ctrl in ctrls:
+            data.ctrl[:] = ctrl
+            mujoco.mj_step(model, data, nstep=decimation[0])
+        raw_t.append(time.perf_counter() - t0)
+    full, quiet_time, raw = (statistics.median(x) for x in (full_t, quiet_t, raw_t))
+    return {
+        "what": "episode",
+        "controller": controller,
+        "planner": planner,
+        "status": status,
+        "physics_steps": steps,
+        "repeats": repeats,
+        "raw_step_us_median": raw / steps * 1e6,
+        "episode_step_us_median": full / steps * 1e6,
+        "episode_without_logging_step_us_median": quiet_time / steps * 1e6,
+        "overhead_ratio": statistics.median(a / b for a, b in zip(full_t, raw_t, strict=True)) - 1.0,
+        "logging_share_of_overhead": (full - quiet_time) / max(full - raw, 1e-12),
+        "note": "wall time of the loops; the quiet run also records its controls for the replay",
+    }
+
+
 def run_benchmarks(
     out: Path,
     *,
@@ -104,12 +176,16 @@ def run_benchmarks(
     n_steps: int,
     repeats: int,
     control_dts: list[float | None] | None = None,
+    episode: bool = True,
 ) -> dict[str, Any]:
     """Run the benchmarks (each controller at each control period) and write JSON to ``out``."""
     entries = []
     for c in controllers:
         for dt in control_dts or [None]:
             entries.append(bench_controller(c, n_steps=n_steps, repeats=repeats, control_dt=dt))
+    episodes = (
+        [bench_episode(controller=c, repeats=max(1, repeats // 2)) for c in controllers] if episode else []
+    )
     results = {
         "machine": {
             "python": platform.python_version(),
@@ -120,6 +196,7 @@ def run_benchmarks(
         "alternating repetitions, medians of CPU time",
         "target": "overhead_ratio <= 0.05",
         "controllers": entries,
+        "episodes": episodes,
     }
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2) + "\n")

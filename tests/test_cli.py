@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -38,6 +39,33 @@ def test_bench_writes_json(tmp_path: Path) -> None:
     assert entry["physics_steps"] == 200
     for key in ("raw_step_us_median", "loop_step_us_median", "overhead_ratio", "solve_time_us_p99"):
         assert isinstance(entry[key], float)
+    (episode,) = result["episodes"]
+    assert episode["status"] == "success"
+    for key in (
+        "raw_step_us_median",
+        "episode_step_us_median",
+        "overhead_ratio",
+        "logging_share_of_overhead",
+    ):
+        assert isinstance(episode[key], float)
+
+
+def test_run_writes_a_video(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "run", "--max-steps", "600", "--video", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+    )
+    assert proc.returncode == 1, proc.stderr  # 600 steps is too short to insert: a timeout failure
+    assert "FAILURE (timeout" in proc.stdout
+    import imageio.v2 as imageio
+
+    reader = imageio.get_reader(str(tmp_path / "episode.mp4"))
+    frames = [frame for frame in reader]
+    assert len(frames) == 19  # 0 .. 0.6 s at 30 fps, both ends
+    assert frames[0].shape == (480, 640, 3)
+    assert frames[-1].std() > 10  # a rendered scene, not a blank frame
 
 
 @pytest.mark.parametrize(

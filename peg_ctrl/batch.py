@@ -1,0 +1,57 @@
+"""Run many episodes in parallel worker processes and collect their summaries."""
+
+from __future__ import annotations
+
+import concurrent.futures as futures
+import multiprocessing
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from peg_ctrl.config import to_dict
+
+__all__ = ["run_batch", "default_workers"]
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+
+
+def _worker(args: tuple[dict[str, Any], str, bool]) -> dict[str, Any]:
+    from peg_ctrl.episode import episode_config_from_mapping, run_episode
+
+    cfg_data, out_dir, plot = args
+    cfg = episode_config_from_mapping(cfg_data)
+    return run_episode(cfg, Path(out_dir), plot=plot).to_dict()
+
+
+def run_batch(
+    jobs: Iterable[tuple[Any, Path]],
+    *,
+    workers: int | None = None,
+    plot: bool = False,
+    progress: bool = True,
+    desc: str = "episodes",
+) -> list[dict[str, Any]]:
+    """Run ``(EpisodeConfig, out_dir)`` jobs on ``workers`` processes; summaries in job order."""
+    from tqdm import tqdm
+
+    items = [(to_dict(cfg), str(out), plot) for cfg, out in jobs]
+    for item in items:  # configs travel as plain data: the controller spec is re-validated
+        ctrl = item[0]["controller"]
+        item[0]["controller"] = {"name": ctrl["name"], **ctrl["params"]}
+    workers = workers or default_workers()
+    results: list[dict[str, Any] | None] = [None] * len(items)
+    ctx = multiprocessing.get_context("spawn")
+    with futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending = {pool.submit(_worker, item): i for i, item in enumerate(items)}
+        successes = 0
+        with tqdm(total=len(items), desc=desc, disable=not progress, unit="ep") as bar:
+            for fut in futures.as_completed(pending):
+                i = pending[fut]
+                results[i] = fut.result()
+                successes += results[i]["status"] == "success"  # type: ignore[index]
+                bar.update(1)
+                bar.set_postfix(success=f"{successes}/{bar.n}")
+    return [r for r in results if r is not None]
