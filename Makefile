@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
 
-.PHONY: install demo sysdeps test test-slow lint bench model calibrate clean
+.PHONY: install demo sysdeps sysdeps-test apt test test-slow lint bench model calibrate clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,14 +20,23 @@ demo: $(STAMP) sysdeps
 	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
 	$(BIN)/peg-sim bench --out $(OUT)/bench.json --steps 3000 --repeats 5
 
-## sysdeps: the EGL/Mesa libraries for offscreen rendering, installed only if missing (needs root)
+## sysdeps: EGL/Mesa for offscreen rendering, installed only if missing (Debian, needs root)
 sysdeps:
-	@ldconfig -p | grep -q 'libEGL.so.1' && ldconfig -p | grep -q 'libGL.so.1' || { \
-	  echo "installing EGL/Mesa for offscreen rendering"; \
-	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libgl1 libgl1-mesa-dri >/dev/null; }
+	@ldconfig -p | grep -q 'libEGL.so.1' && ldconfig -p | grep -q 'libGL.so.1' || \
+	  $(MAKE) --no-print-directory apt PKGS="libegl1 libgl1 libgl1-mesa-dri"
+
+## sysdeps-test: also Xvfb and xdotool for the real-window teleop test
+sysdeps-test: sysdeps
+	@command -v Xvfb >/dev/null && command -v xdotool >/dev/null || \
+	  $(MAKE) --no-print-directory apt PKGS="xvfb xdotool"
+
+apt:
+	@echo "installing $(PKGS)"
+	@apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(PKGS) >/dev/null \
+	  || echo "warning: could not install $(PKGS); tests that need them will skip"
 
 ## test: install, lint, type-check and run the default (fast) test suite
-test: $(STAMP) sysdeps lint
+test: $(STAMP) sysdeps-test lint
 	$(BIN)/python -m pytest -q
 
 ## test-slow: the long physics runs only

@@ -15,7 +15,6 @@ from pathlib import Path
 __all__ = ["main"]
 
 _PENDING = {
-    "teleop": "drive the gripper from the keyboard in a MuJoCo viewer window",
     "sweep": "run an experiment file: controllers x seeds x randomisation, in parallel",
 }
 
@@ -142,6 +141,59 @@ def _run_with_viewer(cfg, out: Path):  # type: ignore[no-untyped-def]
             viewer.close()  # type: ignore[attr-defined]
 
 
+SCRIPTED_INSERTION = (
+    ("z", 0.020),
+    ("jaw", 0.0),
+    ("wait", 0.8),
+    ("z", 0.15),
+    ("roll", 1.5707963267948966),
+    ("wait", 0.5),
+    ("align", None),
+    ("wait", 0.5),
+    ("align", None),
+    ("z", 0.09),
+    ("jaw", 0.085),
+    ("wait", 2.0),
+)
+
+
+def _cmd_teleop(args: argparse.Namespace) -> int:
+    from peg_ctrl.teleop import SPEED_RANGE, ScriptedOperator, TeleopSession
+
+    lo, hi = SPEED_RANGE
+    if not lo <= args.speed <= hi:
+        raise UsageError(f"--speed must be in [{lo}, {hi}], got {args.speed}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    if not args.scripted and not os.environ.get("DISPLAY"):
+        raise UsageError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
+    from controllers import REGISTRY
+
+    if args.controller not in REGISTRY:
+        raise UsageError(f"unknown controller {args.controller!r}; known: {', '.join(sorted(REGISTRY))}")
+    session = TeleopSession(
+        Path(args.out), controller=args.controller, seed=args.seed, randomize=args.randomize
+    )
+    session.mapper.set_speed(args.speed)
+    if args.scripted:
+        ScriptedOperator(session, SCRIPTED_INSERTION).run(max_sim_s=120.0)
+        summary = session.finish("script_done")
+    else:
+        from peg_ctrl.teleop_window import WindowUnavailable, run_window
+
+        try:
+            summary = run_window(session, screenshot=Path(args.screenshot) if args.screenshot else None)
+        except WindowUnavailable as exc:
+            session.finish("no_window")
+            raise UsageError(str(exc)) from None
+    inserted = "inserted" if summary["status"] == "success" else "not inserted"
+    print(
+        f"teleop ended ({summary['end']}): {inserted}, {summary['total_timesteps']} steps, "
+        f"{summary['attempts']} attempt(s); wrote {Path(args.out) / 'summary.json'}"
+    )
+    return 0
+
+
 def _pending(name: str) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
         raise UsageError(f"'{name}' is not available in this version yet")
@@ -194,6 +246,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--viewer", action="store_true", help="show the episode in the MuJoCo viewer instead")
     p.add_argument("--config", help="episode config file (.yaml, .toml or .json)")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser(
+        "teleop",
+        help="drive the gripper from the keyboard in a window (or --scripted, headless)",
+        description="Teleoperation. Keys: 4/5 +Y/-Y, 6/7 +X/-X, 8/9 +Z/-Z, Q/E roll, Up/Down pitch, "
+        "Left/Right yaw, [ / ] jaw open/close, Shift fine motion, J/K/L speed 0.5x/1x/2x, -/= speed "
+        "down/up, Z reset, Esc quit. Mouse: left-drag rotate, right-drag move, scroll zoom.",
+    )
+    p.add_argument("--controller", default="pd", help="controller name (default pd)")
+    p.add_argument("--seed", type=int, default=0, help="random seed for the peg's start pose")
+    p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose (and on reset)")
+    p.add_argument("--speed", type=float, default=1.0, help="initial speed multiplier, 0.1 to 5 (default 1)")
+    p.add_argument("--out", default="runs/teleop", help="output directory (default runs/teleop)")
+    p.add_argument("--screenshot", help="save the last frame (with overlay) to this PNG on exit")
+    p.add_argument("--scripted", action="store_true", help="run a scripted insertion headless (no window)")
+    p.set_defaults(func=_cmd_teleop)
 
     for name, text in _PENDING.items():
         p = sub.add_parser(name, help=f"{text} (coming in a later version)")

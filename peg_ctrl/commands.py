@@ -39,12 +39,12 @@ def euler_to_quat(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
     return quat
 
 
-def quat_to_euler(quat: Sequence[float]) -> NDArray[np.float64]:
+def quat_to_euler(quat: ArrayLike) -> NDArray[np.float64]:
     """Extrinsic X-Y-Z Euler angles ``[roll, pitch, yaw]`` [rad] of a unit quaternion ``[w, x, y, z]``.
 
     Pitch is in [-pi/2, pi/2]; at exactly +-pi/2 roll and yaw are not unique (roll is set to 0).
     """
-    w, x, y, z = (float(v) for v in quat)
+    w, x, y, z = (float(v) for v in np.asarray(quat, dtype=float))
     sinp = 2.0 * (w * y - z * x)
     pitch = math.copysign(math.pi / 2.0, sinp) if abs(sinp) >= 1.0 else math.asin(sinp)
     if abs(sinp) >= 1.0 - 1e-12:
