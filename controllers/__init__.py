@@ -11,7 +11,11 @@ from typing import Any
 
 import mujoco
 
+from controllers.admittance import AdmittanceConfig, AdmittanceController
 from controllers.base import Controller, ControlOutput, Diagnostics
+from controllers.diffik import DiffIKConfig, DiffIKController
+from controllers.impedance import ImpedanceConfig, ImpedanceController
+from controllers.mpc import MPCConfig, MPCController
 from controllers.pd import PDConfig, PDController
 
 __all__ = [
@@ -20,6 +24,14 @@ __all__ = [
     "Diagnostics",
     "PDConfig",
     "PDController",
+    "AdmittanceConfig",
+    "AdmittanceController",
+    "DiffIKConfig",
+    "DiffIKController",
+    "MPCConfig",
+    "MPCController",
+    "ImpedanceConfig",
+    "ImpedanceController",
     "REGISTRY",
     "UnknownController",
     "make_controller",
@@ -28,6 +40,10 @@ __all__ = [
 # name -> (config class, factory(model, config) -> controller)
 REGISTRY: dict[str, tuple[type, Callable[..., Controller]]] = {
     "pd": (PDConfig, PDController),
+    "impedance": (ImpedanceConfig, ImpedanceController),
+    "admittance": (AdmittanceConfig, AdmittanceController),
+    "diffik": (DiffIKConfig, DiffIKController),
+    "mpc": (MPCConfig, MPCController),
 }
 
 

@@ -46,6 +46,9 @@ __all__ = [
     "GRIPPER_PREFIX",
     "HOME_KEY",
     "contact_sensor_name",
+    "FT_SITE",
+    "build_robot_spec",
+    "export_robot",
 ]
 
 SLIDE_JOINTS = ("gripper_transX", "gripper_transY", "gripper_transZ")
@@ -55,6 +58,7 @@ BALL_ACTUATORS = ("act_rotX", "act_rotY", "act_rotZ")
 GRIPPER_PREFIX = "2f85/"  # prefix of every name that comes from the Menagerie model
 JAW_ACTUATOR = GRIPPER_PREFIX + "fingers_actuator"
 PINCH_SITE = GRIPPER_PREFIX + "pinch"
+FT_SITE = "ft_sensor"
 HOME_KEY = "home"
 
 # Pinch site height above the Menagerie model's own world origin: base_mount at 0.007, base at
@@ -232,9 +236,16 @@ def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     ball.armature = 0.1
 
     # Hang the gripper upside down (180 degrees about X) so the pinch site sits at the origin.
-    frame = root.add_frame()
-    frame.quat = [0.0, 1.0, 0.0, 0.0]
-    frame.pos = [0.0, 0.0, _PINCH_IN_MENAGERIE]
+    # A massless welded body (not an MJCF frame) so that other MJCF readers (Pinocchio) follow.
+    mount = root.add_body()
+    mount.name = "gripper_mount"
+    mount.quat = [0.0, 1.0, 0.0, 0.0]
+    mount.pos = [0.0, 0.0, _PINCH_IN_MENAGERIE]
+    ft = mount.add_site()
+    ft.name = FT_SITE  # simulated 6-axis force/torque sensor between the base and the gripper
+    ft.size = [0.005, 0.005, 0.005]
+    ft.group = 5
+    frame = mount.add_frame()
     gripper = mujoco.MjSpec.from_file(str(gripper_xml()))
     meshdir = Path(gripper.modelfiledir) / gripper.meshdir
     for mesh in gripper.meshes:
@@ -317,6 +328,20 @@ def contact_sensor_name(kind: str, first: str, second: str) -> str:
     return f"contact_{kind}/{first}-{second}"
 
 
+def _add_ft_sensor(spec: mujoco.MjSpec) -> None:
+    """Force and torque at the gripper mount, in the ``ft_sensor`` site frame (gripper frame
+    turned 180 degrees about X): what the base exerts on the gripper below it."""
+    for kind, sensor_type in (
+        ("force", mujoco.mjtSensor.mjSENS_FORCE),
+        ("torque", mujoco.mjtSensor.mjSENS_TORQUE),
+    ):
+        sensor = spec.add_sensor()
+        sensor.name = f"ft_{kind}"
+        sensor.type = sensor_type
+        sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
+        sensor.objname = FT_SITE
+
+
 def _add_contact_sensors(spec: mujoco.MjSpec) -> None:
     """Net contact force per body-group pair and the closest contact on the peg, computed in C.
 
@@ -374,6 +399,7 @@ def build_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
     _add_gripper(spec, cfg)
     _add_cameras_and_lights(spec, cfg)
     _add_contact_sensors(spec)
+    _add_ft_sensor(spec)
     model = spec.compile()
     _add_home_key(spec, model, cfg)
     return spec
@@ -404,6 +430,58 @@ def _restore_explicit_inertials(spec: mujoco.MjSpec, root: Any) -> None:
             diaginertia=" ".join(repr(float(v)) for v in body.inertia),
         )
         elem.insert(0, inertial)
+
+
+def build_robot_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
+    """Only the base stack and the gripper (no table, peg, block, sensors or keyframes): the
+    robot model for other dynamics libraries (Pinocchio)."""
+    cfg = cfg or SceneConfig()
+    spec = mujoco.MjSpec()
+    spec.modelname = "peg_ctrl_robot"
+    spec.compiler.degree = False
+    _set_physics_options(spec, cfg)
+    _add_gripper(spec, cfg)
+    return spec
+
+
+def export_robot(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
+    """Write the robot-only model as ``out_dir/robot.xml`` (meshes referenced by absolute path)."""
+    spec = build_robot_spec(cfg)
+    model = spec.compile()
+    # Write every body's compiled inertial explicitly: MuJoCo derives some from mesh geoms,
+    # which other readers cannot do.
+    for body in spec.bodies:
+        if body.name == "world" or not body.name:
+            continue
+        b = model.body(body.name)
+        body.mass = float(b.mass[0])
+        body.ipos = b.ipos.tolist()
+        body.explicitinertial = True
+        if body.mass == 0.0:  # the welded mount: say so, rather than let a reader pick a default
+            body.inertia = [0.0, 0.0, 0.0]
+            continue
+        # Full tensor in the body frame (no inertial quaternion: not every reader applies it).
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, b.iquat)
+        rot = rot.reshape(3, 3)
+        tensor = rot @ np.diag(b.inertia) @ rot.T
+        body.iquat = [1.0, 0.0, 0.0, 0.0]
+        body.inertia = [0.0, 0.0, 0.0]
+        body.fullinertia = [
+            tensor[0, 0],
+            tensor[1, 1],
+            tensor[2, 2],
+            tensor[0, 1],
+            tensor[0, 2],
+            tensor[1, 2],
+        ]
+        body.explicitinertial = True
+    spec.compile()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "robot.xml"
+    path.write_text(spec.to_xml())
+    return path
 
 
 def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:

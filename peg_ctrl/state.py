@@ -37,7 +37,9 @@ class ControlState(NamedTuple):
 
     ``p_world`` (3,) [m] pinch point; ``quat_world`` (4,) ``[w, x, y, z]``; ``v_world`` (3,) [m/s];
     ``omega_body`` (3,) [rad/s] angular velocity in the gripper frame; ``jaw_sep_m`` [m] measured
-    between the pad faces.
+    between the pad faces; ``ft_wrench`` (6,) the force [N] and torque [N m] that the base exerts
+    on the gripper at the mount, in the ``ft_sensor`` site frame (the gripper frame turned 180
+    degrees about X), unfiltered.
     """
 
     t: float
@@ -46,6 +48,7 @@ class ControlState(NamedTuple):
     v_world: NDArray[np.float64]
     omega_body: NDArray[np.float64]
     jaw_sep_m: float
+    ft_wrench: NDArray[np.float64] = np.zeros(6)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,6 +127,13 @@ class StateReader:
         # Box half-thickness along the closing direction (local y of the pad boxes).
         self._pad_half_sum = float(sum(model.geom_size[g][1] for g in self._pads))
         self._body_group = self._classify_bodies(model)
+        force = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, "ft_force")
+        torque = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, "ft_torque")
+        self._ft = -1
+        if force >= 0 and torque >= 0:
+            if model.sensor_adr[torque] != model.sensor_adr[force] + 3:
+                raise ValueError("ft_force and ft_torque must be adjacent in sensordata")
+            self._ft = int(model.sensor_adr[force])
         # Contact sensors of the scene (see scene._add_contact_sensors).
         self._force_sensors: list[tuple[int, int]] = []
         for k, (a, b) in enumerate(PAIRS):
@@ -168,7 +178,8 @@ class StateReader:
     def control_state(self, data: mujoco.MjData) -> ControlState:
         q = data.qpos[self._q0 : self._q0 + 7].copy()
         v = data.qvel[self._v0 : self._v0 + 6].copy()
-        return ControlState(float(data.time), q[:3], q[3:], v[:3], v[3:], self.jaw_sep_m(data))
+        ft = data.sensordata[self._ft : self._ft + 6].copy() if self._ft >= 0 else np.zeros(6)
+        return ControlState(float(data.time), q[:3], q[3:], v[:3], v[3:], self.jaw_sep_m(data), ft)
 
     def contacts(self, data: mujoco.MjData) -> tuple[PairContact, ...]:
         """Contacts above the threshold, summed per body-group pair, sorted by pair name."""

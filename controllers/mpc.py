@@ -1,0 +1,278 @@
+"""Linear model-predictive control of the base with CasADi (condensed QP, built once).
+
+Model, per DoF (x, y, z slides; three ball-joint body rates), from the compiled MuJoCo model:
+
+    m dv/dt = u - b v        (m: mass or rotational inertia at the pinch incl. armature,
+                              b: joint damping; gravity/bias forces are compensated outside)
+
+discretised exactly with a zero-order hold of ``mpc_dt``. The reference moves at the target's
+velocity over the horizon; with the feed-forward ``u_ff = b v_ref`` the tracking error
+``z = [p_ref - p, v_ref - v]`` obeys ``z+ = A z - B du``. The QP minimises
+
+    sum_k z_k' Q z_k + du_k' R du_k  +  z_N' P z_N        (P: the DARE solution, so the
+                                                          unconstrained optimum is LQR)
+
+subject to the actuator range on ``u_ff + du`` and a box on the velocity. Its Hessian and
+constraint matrix are constant: CasADi's ``conic`` interface is built once and re-solved with
+new linear terms and bounds, warm-started from the previous solution. Default solver qpOASES
+(``osqp`` selectable). Runs every ``mpc_dt`` (default 10 ms, 100 Hz), zero-order hold between.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import os
+import sys
+import time
+from collections.abc import Iterator
+from typing import ClassVar
+
+import mujoco
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
+from controllers.dynamics import BaseDynamics
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.jaw import load_default
+from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
+from peg_ctrl.sim import control_decimation
+from peg_ctrl.state import ControlState
+
+__all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
+
+
+@dataclasses.dataclass(frozen=True)
+class MPCConfig:
+    name: ClassVar[str] = "mpc"
+    horizon: int = 15  # steps
+    mpc_dt: float = 0.01  # [s], a whole multiple of control_dt
+    q_pos: float = 4.0e4  # weight on position error (translation) [1/m^2]
+    q_vel: float = 10.0  # weight on velocity error [s^2/m^2]
+    q_rot: float = 2.0e3  # weight on orientation error [1/rad^2]
+    q_omega: float = 1.0  # weight on angular velocity error
+    r_force: float = 1e-3  # weight on force effort [1/N^2]
+    r_torque: float = 1e-3  # weight on torque effort [1/(N m)^2]
+    v_max: float = 0.5  # velocity box [m/s]
+    omega_max: float = 2.0  # angular velocity box [rad/s]
+    solver: str = "qpoases"  # qpoases or osqp
+    control_dt: float = 0.001  # [s]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.horizon, int) and self.horizon >= 2):
+            raise ValueError(f"mpc.horizon must be an integer >= 2, got {self.horizon!r}")
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, str) or f.name == "horizon":
+                continue
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"mpc.{f.name} must be finite and > 0, got {value!r}")
+        if self.solver not in ("qpoases", "osqp"):
+            raise ValueError(f"mpc.solver must be one of 'qpoases', 'osqp', got {self.solver!r}")
+        control_decimation(self.mpc_dt, self.control_dt)
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silence C-level writes to stdout (file descriptor 1)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def discretise(mass: float, damping: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Exact ZOH discretisation of ``m dv/dt = u - b v``, state ``[p, v]``: (A (2,2), B (2,1))."""
+    a_c = np.array([[0.0, 1.0], [0.0, -damping / mass]])
+    b_c = np.array([[0.0], [1.0 / mass]])
+    block = np.zeros((3, 3))
+    block[:2, :2] = a_c
+    block[:2, 2:] = b_c
+    e = scipy.linalg.expm(block * dt)
+    return e[:2, :2], e[:2, 2:]
+
+
+def lqr_gain(
+    a: NDArray[np.float64], b: NDArray[np.float64], q: NDArray[np.float64], r: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Discrete LQR: gain ``K`` (u = -K x) and the DARE solution ``P``."""
+    p = scipy.linalg.solve_discrete_are(a, b, q, r)
+    k = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
+    return k, p
+
+
+class MPCController:
+    name = "mpc"
+
+    def __init__(self, model: mujoco.MjModel, config: MPCConfig | None = None) -> None:
+        import casadi as ca
+
+        self.config = c = config or MPCConfig()
+        self.control_dt = c.control_dt
+        self._every = control_decimation(c.mpc_dt, c.control_dt)
+        self._act = ActuatorMap(model)
+        self._jaw = load_default()
+        self.dynamics = BaseDynamics()
+        slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
+        ball = model.joint(BALL_JOINT).dofadr[0]
+        dofs = [*slide_dofs, ball, ball + 1, ball + 2]
+        scratch = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, scratch, model.key(HOME_KEY).id)
+        mujoco.mj_forward(model, scratch)
+        full_m = np.zeros((model.nv, model.nv))
+        mujoco.mj_fullM(model, scratch, full_m)
+        self.mass = np.array([full_m[d, d] for d in dofs])
+        self.damping = model.dof_damping[dofs].copy()
+        self.u_max = np.concatenate([self._act.slide_limit, self._act.ball_limit])
+        n, h = 6, c.horizon
+        # Per-DoF models, stacked block-diagonally: state [p_0, v_0, p_1, v_1, ...].
+        a_blocks, b_blocks, q_blocks, r_diag = [], [], [], []
+        for i in range(n):
+            a_i, b_i = discretise(self.mass[i], self.damping[i], c.mpc_dt)
+            a_blocks.append(a_i)
+            b_blocks.append(-b_i)  # the error falls when the effort rises
+            q_blocks.append(np.diag([c.q_pos, c.q_vel] if i < 3 else [c.q_rot, c.q_omega]))
+            r_diag.append(c.r_force if i < 3 else c.r_torque)
+        self.a = scipy.linalg.block_diag(*a_blocks)
+        self.b = scipy.linalg.block_diag(*b_blocks)
+        self.q = scipy.linalg.block_diag(*q_blocks)
+        self.r = np.diag(r_diag)
+        self.k_lqr, self.p_terminal = lqr_gain(self.a, self.b, self.q, self.r)
+        # Condensed prediction Z = Phi z0 + Gamma U (Z: stacked z_1..z_N, U: du_0..du_{N-1}).
+        nx, nu = 2 * n, n
+        phi = np.zeros((h * nx, nx))
+        gamma = np.zeros((h * nx, h * nu))
+        power = np.eye(nx)
+        for k in range(h):
+            power = self.a @ power
+            phi[k * nx : (k + 1) * nx] = power
+            for j in range(k + 1):
+                gamma[k * nx : (k + 1) * nx, j * nu : (j + 1) * nu] = (
+                    np.linalg.matrix_power(self.a, k - j) @ self.b
+                )
+        q_bar = scipy.linalg.block_diag(*([self.q] * (h - 1) + [self.p_terminal]))
+        r_bar = scipy.linalg.block_diag(*([self.r] * h))
+        self._phi, self._gamma = phi, gamma
+        self._hess = 2.0 * (gamma.T @ q_bar @ gamma + r_bar)
+        self._hess = 0.5 * (self._hess + self._hess.T)
+        self._lin = 2.0 * gamma.T @ q_bar @ phi  # g = lin @ z0
+        # Velocity rows of the prediction: v_k = v_ref - z_v(k).
+        vel_rows = [k * nx + 2 * i + 1 for k in range(h) for i in range(n)]
+        self._vel_rows = np.array(vel_rows)
+        self._a_con = gamma[self._vel_rows]
+        self._vel_limit = np.tile(np.array([c.v_max] * 3 + [c.omega_max] * 3), h)
+        options = (
+            {"printLevel": "none"}
+            if c.solver == "qpoases"
+            else {"osqp": {"verbose": False}, "warm_start_primal": True}
+        )
+        self._solver = ca.conic(
+            "mpc",
+            c.solver,
+            {"h": ca.DM(self._hess).sparsity(), "a": ca.DM(self._a_con).sparsity()},
+            options,
+        )
+        self._hess_dm = ca.DM(self._hess)
+        self._a_dm = ca.DM(self._a_con)
+        self._u = np.zeros(n)
+        self._warm_x = np.zeros(h * nu)
+        self._warm_lam_x = np.zeros(h * nu)
+        self._warm_lam_a = np.zeros(len(vel_rows))
+        self._count = 0
+        self._err = np.zeros(3)
+        self.last_solve = Diagnostics()
+        with _quiet_stdout():  # qpOASES prints its licence banner on the first solve
+            self.solve(np.zeros(12), np.zeros(6), np.zeros(6))
+        self.reset_warm_start()
+
+    def reset_warm_start(self) -> None:
+        self._warm_x[:] = 0.0
+        self._warm_lam_x[:] = 0.0
+        self._warm_lam_a[:] = 0.0
+
+    def reset(self, state: ControlState) -> None:
+        self._u[:] = 0.0
+        self.reset_warm_start()
+        self._count = 0
+
+    def error_state(self, state: ControlState, target: GripperTarget) -> NDArray[np.float64]:
+        """``z0`` (12,): per DoF (position or orientation error, velocity error)."""
+        mujoco.mju_subQuat(self._err, target.quat_world, state.quat_world)
+        pos = np.concatenate([target.p_world - state.p_world, self._err])
+        vel = np.concatenate([target.v_world - state.v_world, target.omega_body - state.omega_body])
+        z = np.empty(12)
+        z[0::2] = pos
+        z[1::2] = vel
+        return z
+
+    def solve(
+        self, z0: NDArray[np.float64], u_ff: NDArray[np.float64], v_ref: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """The first effort correction ``du_0`` (6,) of the QP from error ``z0``."""
+        h = self.config.horizon
+        g = self._lin @ z0
+        lbx = np.tile(-self.u_max - u_ff, h)
+        ubx = np.tile(self.u_max - u_ff, h)
+        # v_k = v_ref - (Phi z0 + Gamma U)_vel must stay in [-v_max, v_max].
+        free = self._phi[self._vel_rows] @ z0
+        v_ref_rows = np.tile(v_ref, h)
+        lba = v_ref_rows - self._vel_limit - free
+        uba = v_ref_rows + self._vel_limit - free
+        lba = np.minimum(lba, uba)  # an infeasible start (already too fast) relaxes to equality
+        sol = self._solver(
+            h=self._hess_dm,
+            g=g,
+            a=self._a_dm,
+            lbx=lbx,
+            ubx=ubx,
+            lba=lba,
+            uba=uba,
+            x0=self._warm_x,
+            lam_x0=self._warm_lam_x,
+            lam_a0=self._warm_lam_a,
+        )
+        x = np.asarray(sol["x"]).reshape(-1)
+        self._warm_x = np.concatenate([x[6:], x[-6:]])  # shift the plan for the next solve
+        self._warm_lam_x = np.asarray(sol["lam_x"]).reshape(-1)
+        self._warm_lam_a = np.asarray(sol["lam_a"]).reshape(-1)
+        return x[:6]
+
+    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        t0 = time.perf_counter()
+        v_ref = np.concatenate([target.v_world, target.omega_body])
+        u_ff = self.damping * v_ref
+        diag = Diagnostics(0.0, "hold", 0)
+        if self._count % self._every == 0:
+            check_target(target)
+            z0 = self.error_state(state, target)
+            if not np.all(np.isfinite(z0)):
+                raise ValueError(f"non-finite control from state at t={state.t}: {state}")
+            try:
+                self._u = self.solve(z0, u_ff, v_ref)
+                stats = self._solver.stats()
+                status = "ok" if stats.get("success", True) else str(stats.get("return_status", "failed"))
+                diag = Diagnostics(time.perf_counter() - t0, status, int(stats.get("iter_count", 0) or 0))
+            except RuntimeError as exc:
+                self._u = -self.k_lqr @ z0  # fall back to the LQR law, reported
+                diag = Diagnostics(time.perf_counter() - t0, f"qp_failed: {exc}".splitlines()[0], 0)
+            self.last_solve = diag
+        self._count += 1
+        tau = (
+            u_ff
+            + self._u
+            + self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
+        )
+        np.clip(tau, -self.u_max, self.u_max, out=tau)
+        ctrl = self._act.pack(tau[:3].tolist(), tau[3:].tolist(), self._jaw.sep_to_byte(target.jaw_sep_m))
+        if diag.status == "hold":
+            diag = Diagnostics(time.perf_counter() - t0, "hold", 0)
+        return ControlOutput(ctrl, diag)
