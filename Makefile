@@ -18,7 +18,7 @@ install: $(STAMP)
 ## demo: install, then run the main job: one autonomous episode, headless, with log, plot, video
 demo: $(STAMP) sysdeps
 	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
-	$(BIN)/peg-sim bench --out $(OUT)/bench.json --steps 3000 --repeats 5
+	$(BIN)/peg-sim bench --controller pd --out $(OUT)/bench.json --steps 3000 --repeats 5
 
 ## sysdeps: EGL/Mesa for offscreen rendering, installed only if missing (Debian, needs root)
 sysdeps:
@@ -49,7 +49,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 bench: $(STAMP)
-	$(BIN)/peg-sim bench --out $(OUT)/bench.json --control-dt 0.001 --control-dt 0.002 --control-dt 0.005
+	$(BIN)/peg-sim bench --out $(OUT)/bench.json
 
 model: $(STAMP)
 	$(BIN)/peg-sim model --out $(OUT)/model

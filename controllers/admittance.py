@@ -31,6 +31,7 @@ __all__ = ["AdmittanceConfig", "AdmittanceController"]
 @dataclasses.dataclass(frozen=True)
 class AdmittanceConfig:
     name: ClassVar[str] = "admittance"
+    GAINS: ClassVar[tuple[str, ...]] = ("stiffness",)
     mass: float = 2.0  # virtual mass [kg]
     stiffness: float = 300.0  # virtual spring to the reference [N/m]
     damping_ratio: float = 1.0  # D = 2 zeta sqrt(K M)

@@ -35,6 +35,7 @@ __all__ = ["DiffIKConfig", "DiffIKController"]
 @dataclasses.dataclass(frozen=True)
 class DiffIKConfig:
     name: ClassVar[str] = "diffik"
+    GAINS: ClassVar[tuple[str, ...]] = ("position_cost", "orientation_cost")
     ik_dt: float = 0.01  # IK period [s] (100 Hz), a whole multiple of control_dt
     solver: str = "daqp"  # any qpsolvers solver: daqp (default), osqp, ...
     position_cost: float = 1.0
@@ -84,7 +85,7 @@ class DiffIKController:
             lm_damping=c.lm_damping,
         )
         self.damping_task = mink.DampingTask(self.robot, cost=c.damping_cost)
-        velocities = {name: c.v_max for name in SLIDE_JOINTS}
+        velocities: dict[str, float | NDArray[np.float64]] = {name: c.v_max for name in SLIDE_JOINTS}
         velocities[BALL_JOINT] = np.full(3, c.omega_max)
         # Built once: passing limits=None would make mink rebuild its defaults on every call.
         self.limits = [mink.ConfigurationLimit(self.robot), mink.VelocityLimit(self.robot, velocities)]

@@ -35,6 +35,7 @@ __all__ = ["ImpedanceConfig", "ImpedanceController"]
 @dataclasses.dataclass(frozen=True)
 class ImpedanceConfig:
     name: ClassVar[str] = "impedance"
+    GAINS: ClassVar[tuple[str, ...]] = ("k_pos", "k_rot")
     k_pos: tuple[float, float, float] = (1500.0, 1500.0, 1500.0)  # translational stiffness [N/m]
     k_rot: tuple[float, float, float] = (120.0, 120.0, 120.0)  # rotational stiffness [N m/rad]
     damping_ratio: float = 1.0  # zeta of D = 2 zeta sqrt(K m)

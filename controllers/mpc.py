@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import io
 import math
 import os
 import sys
@@ -48,6 +49,7 @@ __all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
 @dataclasses.dataclass(frozen=True)
 class MPCConfig:
     name: ClassVar[str] = "mpc"
+    GAINS: ClassVar[tuple[str, ...]] = ("q_pos", "q_rot")
     horizon: int = 15  # steps
     mpc_dt: float = 0.01  # [s], a whole multiple of control_dt
     q_pos: float = 4.0e4  # weight on position error (translation) [1/m^2]
@@ -78,13 +80,19 @@ class MPCConfig:
 @contextlib.contextmanager
 def _quiet_stdout() -> Iterator[None]:
     """Silence C-level writes to stdout (file descriptor 1)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None)
     sys.stdout.flush()
+    libc.fflush(None)
     saved = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
         os.dup2(devnull, 1)
-        yield
+        with contextlib.redirect_stdout(io.StringIO()):  # CasADi prints through Python's stdout
+            yield
     finally:
+        libc.fflush(None)  # C stdio buffers what it printed; drop it before stdout comes back
         os.dup2(saved, 1)
         os.close(saved)
         os.close(devnull)
@@ -175,12 +183,13 @@ class MPCController:
             if c.solver == "qpoases"
             else {"osqp": {"verbose": False}, "warm_start_primal": True}
         )
-        self._solver = ca.conic(
-            "mpc",
-            c.solver,
-            {"h": ca.DM(self._hess).sparsity(), "a": ca.DM(self._a_con).sparsity()},
-            options,
-        )
+        with _quiet_stdout():  # qpOASES prints its licence banner when it is created
+            self._solver = ca.conic(
+                "mpc",
+                c.solver,
+                {"h": ca.DM(self._hess).sparsity(), "a": ca.DM(self._a_con).sparsity()},
+                options,  # type: ignore[arg-type]
+            )
         self._hess_dm = ca.DM(self._hess)
         self._a_dm = ca.DM(self._a_con)
         self._u = np.zeros(n)
@@ -190,7 +199,7 @@ class MPCController:
         self._count = 0
         self._err = np.zeros(3)
         self.last_solve = Diagnostics()
-        with _quiet_stdout():  # qpOASES prints its licence banner on the first solve
+        with _quiet_stdout():  # ... or on its first solve
             self.solve(np.zeros(12), np.zeros(6), np.zeros(6))
         self.reset_warm_start()
 

@@ -41,6 +41,7 @@ class PDConfig:
     """Gains and limits of the reference controller."""
 
     name: ClassVar[str] = "pd"
+    GAINS: ClassVar[tuple[str, ...]] = ("kp_pos", "kd_pos", "k_rot", "k_omega")  # perturbed in sweeps
     kp_pos: float = 3000.0  # slide stiffness [N/m]
     kd_pos: float = 40.0  # slide damping on top of the joint damping [N s/m]
     v_max: float = 0.5  # soft cap on approach speed [m/s]

@@ -14,9 +14,7 @@ from pathlib import Path
 
 __all__ = ["main"]
 
-_PENDING = {
-    "sweep": "run an experiment file: controllers x seeds x randomisation, in parallel",
-}
+_PENDING: dict[str, str] = {}
 
 
 class UsageError(Exception):
@@ -62,6 +60,20 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     for dt in args.control_dt or []:
         if not dt > 0:
             raise UsageError(f"--control-dt must be > 0 s, got {dt}")
+    if args.sweep:
+        import json
+
+        from experiments.runner import bench_sweep
+
+        result = bench_sweep(args.sweep_episodes)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result, indent=2) + "\n")
+        print(
+            f"sweep of {result['episodes']} episodes: 1 worker {result['wall_s']['1']:.1f} s, "
+            f"2 workers {result['wall_s']['2']:.1f} s, speedup {result['speedup_2_vs_1']:.2f}x; wrote {out}"
+        )
+        return 0
     results = run_benchmarks(
         Path(args.out),
         controllers=names,
@@ -74,7 +86,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             f"{r['controller']:>10} @ {1e6 / r['control_period_us']:5.0f} Hz: "
             f"physics {r['raw_step_us_median']:.1f} us/step, with controller "
             f"{r['loop_step_us_median']:.1f} us/step, overhead {100 * r['overhead_ratio']:+.1f} %, "
-            f"solve median {r['solve_time_us_median']:.1f} us (p99 {r['solve_time_us_p99']:.1f} us)"
+            f"solve median {r['solver_call_us_median']:.1f} us (p99 {r['solver_call_us_p99']:.1f} us, "
+            f"period {r['solver_period_us']:.0f} us)"
+        )
+    for e in results["episodes"]:
+        print(
+            f"{e['controller']:>10} episode: physics {e['raw_step_us_median']:.1f} us/step, loop "
+            f"{e['episode_step_us_median']:.1f} us/step, overhead {100 * e['overhead_ratio']:+.1f} % "
+            f"(logging {100 * e['logging_share_of_overhead']:.0f} % of it)"
         )
     print(f"wrote {args.out}")
     return 0
@@ -194,6 +213,32 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from experiments.config import load_experiment
+    from experiments.runner import run_sweep
+    from peg_ctrl.batch import default_workers
+
+    exp = load_experiment(Path(args.config))
+    workers = args.workers or default_workers()
+    if workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {workers}")
+    out = Path(args.out) if args.out else Path("runs") / exp.name
+    rows = run_sweep(exp, out, workers=workers, backend=args.backend, address=args.address)
+    wins = sum(r["status"] == "success" for r in rows)
+    print(f"{exp.name}: {wins}/{len(rows)} episodes inserted; wrote {out / 'report.md'}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from experiments.report import write_report
+
+    out = Path(args.dir)
+    if not (out / "episodes.csv").is_file():
+        raise UsageError(f"{out} has no episodes.csv (run peg-sim sweep first)")
+    print(f"wrote {write_report(out)}")
+    return 0
+
+
 def _pending(name: str) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
         raise UsageError(f"'{name}' is not available in this version yet")
@@ -227,6 +272,8 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         help="control period in s to bench (repeatable; default: each controller's own)",
     )
+    p.add_argument("--sweep", action="store_true", help="instead: sweep speedup of 2 workers over 1")
+    p.add_argument("--sweep-episodes", type=int, default=6, help="episodes per sweep timing (default 6)")
     p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser(
@@ -263,6 +310,25 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scripted", action="store_true", help="run a scripted insertion headless (no window)")
     p.set_defaults(func=_cmd_teleop)
 
+    p = sub.add_parser(
+        "sweep",
+        help="run an experiment file (controllers x planners x clearances x seeds) in parallel",
+        description="Run or resume an experiment; writes DIR/episodes.csv, .parquet, summary.csv, "
+        "report.md and plots. Rerunning the same command skips finished episodes.",
+    )
+    p.add_argument(
+        "config", help="experiment file (.yaml, .toml or .json), e.g. experiments/configs/quick.yaml"
+    )
+    p.add_argument("--out", help="output directory (default runs/<experiment name>)")
+    p.add_argument("--workers", type=int, help="worker processes (default: one per core)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--address", help="Ray cluster address (with --backend ray)")
+    p.set_defaults(func=_cmd_sweep)
+
+    p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")
+    p.add_argument("dir", help="a sweep's output directory")
+    p.set_defaults(func=_cmd_plot)
+
     for name, text in _PENDING.items():
         p = sub.add_parser(name, help=f"{text} (coming in a later version)")
         p.set_defaults(func=_pending(name))
@@ -277,7 +343,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         return int(args.func(args))
-    except (UsageError, ValueError, FileNotFoundError) as exc:
+    except (UsageError, ValueError, FileNotFoundError, RuntimeError) as exc:
         print(f"peg-sim: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -23,7 +23,9 @@ Randomizations
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -61,6 +63,8 @@ __all__ = [
     "run_episode",
     "episode_config_from_mapping",
     "FAILURE_REASONS",
+    "DomainConfig",
+    "prepare_model",
 ]
 
 FAILURE_REASONS = ("timeout", "force_spike", "excessive_tilt", "grasp_lost", "diverged")
@@ -101,6 +105,32 @@ class RandomizationConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class DomainConfig:
+    """Domain randomization beyond the start pose, drawn per seed (ranges are [low, high])."""
+
+    peg_mass_scale: tuple[float, float] = (1.0, 1.0)  # factor on the peg's mass and inertia
+    friction_scale: tuple[float, float] = (1.0, 1.0)  # factor on the peg's and block's friction
+    gain_scale: tuple[float, float] = (1.0, 1.0)  # factor on each of the controller's GAINS
+    position_noise: float = 0.0  # std of noise on the measured gripper position [m]
+    velocity_noise: float = 0.0  # std of noise on the measured gripper velocity [m/s, rad/s]
+    force_noise: float = 0.0  # std of noise on the force/torque sensor [N, N m]
+
+    def __post_init__(self) -> None:
+        for name in ("peg_mass_scale", "friction_scale", "gain_scale"):
+            lo, hi = getattr(self, name)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+                raise ValueError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
+        for name in ("position_noise", "velocity_noise", "force_noise"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"domain.{name} must be finite and >= 0, got {value!r}")
+
+    @property
+    def noisy(self) -> bool:
+        return self.position_noise > 0 or self.velocity_noise > 0 or self.force_noise > 0
+
+
+@dataclasses.dataclass(frozen=True)
 class LogConfig:
     interval: int = 50  # physics steps between step records (SPEC: 50)
     contact_threshold: float = 0.01  # pair forces below this are not logged [N]
@@ -125,6 +155,7 @@ class EpisodeConfig:
     task: TaskConfig = TaskConfig()
     success: SuccessConfig = SuccessConfig()
     randomization: RandomizationConfig = RandomizationConfig()
+    domain: DomainConfig = DomainConfig()
     log: LogConfig = LogConfig()
     scene: SceneConfig = SceneConfig()
 
@@ -198,6 +229,52 @@ class EpisodeResult:
         )
 
 
+@functools.lru_cache(maxsize=8)
+def _compiled(scene: SceneConfig) -> mujoco.MjModel:
+    """One compiled model per scene per process (sweep workers reuse it across episodes)."""
+    return build_model(scene)
+
+
+def _domain_draw(cfg: EpisodeConfig) -> dict[str, float]:
+    """The per-seed domain factors (a random stream separate from the start pose's)."""
+    d = cfg.domain
+    rng = np.random.default_rng([cfg.seed, 1])
+    return {
+        "peg_mass_scale": float(rng.uniform(*d.peg_mass_scale)),
+        "friction_scale": float(rng.uniform(*d.friction_scale)),
+        "gain_scale": float(rng.uniform(*d.gain_scale)),
+    }
+
+
+def prepare_model(cfg: EpisodeConfig) -> tuple[mujoco.MjModel, dict[str, float]]:
+    """A private copy of the scene's model with the domain randomization applied."""
+    model = copy.copy(_compiled(cfg.scene))
+    draw = _domain_draw(cfg)
+    peg = model.body("peg").id
+    model.body_mass[peg] *= draw["peg_mass_scale"]
+    model.body_inertia[peg] *= draw["peg_mass_scale"]
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] in (peg, model.body("block").id):
+            model.geom_friction[g, 0] *= draw["friction_scale"]
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+    return model, draw
+
+
+def controller_params(cfg: EpisodeConfig, gain_scale: float) -> dict[str, Any]:
+    """The controller's parameters with every gain in its config's ``GAINS`` scaled."""
+    config_cls = REGISTRY[cfg.controller.name][0]
+    params = dict(cfg.controller.params)
+    if gain_scale != 1.0:
+        defaults = config_cls()
+        for name in getattr(config_cls, "GAINS", ()):
+            value = params.get(name, getattr(defaults, name))
+            if isinstance(value, tuple):
+                params[name] = tuple(v * gain_scale for v in value)
+            else:
+                params[name] = value * gain_scale
+    return params
+
+
 def initial_qpos(model: mujoco.MjModel, cfg: EpisodeConfig) -> np.ndarray:
     """Home keyframe with the peg's start pose randomised from ``cfg.seed`` if enabled."""
     qpos = model.key("home").qpos.copy()
@@ -246,9 +323,10 @@ def run_episode(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.json").write_text(json.dumps(to_dict(cfg), indent=2) + "\n")
-    model = build_model(cfg.scene)
+    model, draw = prepare_model(cfg)
     data = mujoco.MjData(model)
-    controller = make_controller(cfg.controller.name, model, **cfg.controller.params)
+    controller = make_controller(cfg.controller.name, model, **controller_params(cfg, draw["gain_scale"]))
+    noise_rng = np.random.default_rng([cfg.seed, 2]) if cfg.domain.noisy else None
     decimation = control_decimation(controller.control_dt, model.opt.timestep)
     reader = StateReader(model, contact_threshold_n=cfg.log.contact_threshold)
     fsm = InsertionStateMachine(
@@ -306,6 +384,8 @@ def run_episode(
         while step < cfg.max_steps:
             t = float(data.time)
             cs = reader.control_state(data)
+            if noise_rng is not None:
+                cs = _noisy(cs, cfg.domain, noise_rng)
             try:
                 target = fsm.update(t, cs, peg)
             except GraspLost as exc:
@@ -450,6 +530,16 @@ def run_episode(
             )
         (out_dir / "summary.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
     return result
+
+
+def _noisy(cs: Any, domain: DomainConfig, rng: np.random.Generator) -> Any:
+    """The control state as a noisy sensor suite would report it."""
+    return cs._replace(
+        p_world=cs.p_world + rng.normal(0.0, domain.position_noise, 3),
+        v_world=cs.v_world + rng.normal(0.0, domain.velocity_noise, 3),
+        omega_body=cs.omega_body + rng.normal(0.0, domain.velocity_noise, 3),
+        ft_wrench=cs.ft_wrench + rng.normal(0.0, domain.force_noise, 6),
+    )
 
 
 def _step_record(

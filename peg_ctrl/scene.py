@@ -461,9 +461,9 @@ def export_robot(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
             body.inertia = [0.0, 0.0, 0.0]
             continue
         # Full tensor in the body frame (no inertial quaternion: not every reader applies it).
-        rot = np.zeros(9)
-        mujoco.mju_quat2Mat(rot, b.iquat)
-        rot = rot.reshape(3, 3)
+        flat = np.zeros(9)
+        mujoco.mju_quat2Mat(flat, b.iquat)
+        rot = flat.reshape(3, 3)
         tensor = rot @ np.diag(b.inertia) @ rot.T
         body.iquat = [1.0, 0.0, 0.0, 0.0]
         body.inertia = [0.0, 0.0, 0.0]

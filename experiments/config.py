@@ -1,0 +1,178 @@
+"""Experiment files: controllers x planners x clearances x seeds, with randomization settings.
+
+An experiment file (YAML, TOML or JSON) loads into :class:`ExperimentConfig`; every error names
+its field (``controllers[1].kp_pos: ...``). Example::
+
+    name: quick
+    controllers:
+      - {name: pd}
+      - {name: mpc, horizon: 15}
+    planners: [ruckig]
+    clearances: [0.001, 0.0002]     # radial hole clearance [m]
+    seeds: 20                       # seeds 0..19 (or a list)
+    randomization: {enabled: true, peg_xy: 0.015, peg_yaw: 0.2}
+    domain: {peg_mass_scale: [0.8, 1.2], friction_scale: [0.8, 1.2], gain_scale: [0.9, 1.1]}
+    task: {force_guarded_insert: false}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from peg_ctrl.assets import AssetParams
+from peg_ctrl.config import ConfigError, load, read_mapping, to_dict
+from peg_ctrl.episode import (
+    ControllerSpec,
+    DomainConfig,
+    EpisodeConfig,
+    RandomizationConfig,
+    episode_config_from_mapping,
+)
+from peg_ctrl.scene import SceneConfig
+from peg_ctrl.task import SuccessConfig, TaskConfig
+from planners import PLANNERS
+
+__all__ = ["ExperimentConfig", "Job", "load_experiment", "expand"]
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentConfig:
+    name: str
+    controllers: tuple[ControllerSpec, ...]
+    planners: tuple[str, ...] = ("ruckig",)
+    clearances: tuple[float, ...] = (0.001,)  # radial hole clearance [m]
+    seeds: tuple[int, ...] = tuple(range(20))
+    max_steps: int = 20_000
+    randomization: RandomizationConfig = RandomizationConfig(enabled=True)
+    domain: DomainConfig = DomainConfig()
+    task: TaskConfig = TaskConfig()
+    success: SuccessConfig = SuccessConfig()
+
+    def __post_init__(self) -> None:
+        if not self.name or "/" in self.name:
+            raise ValueError(f"name must be a non-empty string without '/', got {self.name!r}")
+        if not self.controllers:
+            raise ValueError("controllers: at least one controller is needed")
+        for i, p in enumerate(self.planners):
+            if p not in PLANNERS:
+                raise ValueError(
+                    f"planners[{i}]: unknown planner {p!r}; known: {', '.join(sorted(PLANNERS))}"
+                )
+        if not self.clearances:
+            raise ValueError("clearances: at least one clearance is needed")
+        for i, c in enumerate(self.clearances):
+            if not c >= 0:
+                raise ValueError(f"clearances[{i}]: must be >= 0 m, got {c!r}")
+            try:
+                AssetParams(clearance=c)
+            except ValueError as exc:
+                raise ValueError(f"clearances[{i}]: {exc}") from None
+        if not self.seeds or any(s < 0 for s in self.seeds):
+            raise ValueError(f"seeds: need at least one seed, all >= 0, got {list(self.seeds)[:5]}")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("seeds: repeated seeds")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """One episode of a sweep: its key, the varied values and its full config."""
+
+    key: str
+    controller: str
+    controller_label: str
+    planner: str
+    clearance: float
+    seed: int
+    config: EpisodeConfig
+
+
+def _controller_label(spec: ControllerSpec, all_specs: tuple[ControllerSpec, ...]) -> str:
+    """The controller's name, with its parameters when the same name appears more than once."""
+    if sum(s.name == spec.name for s in all_specs) == 1 or not spec.params:
+        return spec.name
+    inner = ",".join(f"{k}={v}" for k, v in sorted(spec.params.items()))
+    return f"{spec.name}({inner})"
+
+
+def load_experiment(path: Path) -> ExperimentConfig:
+    """Read and validate an experiment file; errors name the field."""
+    data = read_mapping(Path(path))
+    return experiment_from_mapping(data, default_name=Path(path).stem)
+
+
+def experiment_from_mapping(data: dict[str, Any], *, default_name: str = "experiment") -> ExperimentConfig:
+    data = dict(data)
+    data.setdefault("name", default_name)
+    if "controllers" not in data:
+        raise ConfigError("controllers: missing field (a list like [{name: pd}, {name: mpc}])")
+    raw = data["controllers"]
+    if not isinstance(raw, list):
+        raise ConfigError(f"controllers: expected a list, got {raw!r}")
+    specs = []
+    for i, entry in enumerate(raw):
+        if isinstance(entry, str):
+            entry = {"name": entry}
+        if not isinstance(entry, dict) or "name" not in entry:
+            raise ConfigError(f"controllers[{i}]: expected {{name: ..., <params>}}, got {entry!r}")
+        params = {k: v for k, v in entry.items() if k != "name"}
+        try:
+            specs.append(
+                load(ControllerSpec, {"name": entry["name"], "params": params}, prefix=f"controllers[{i}].")
+            )
+        except ConfigError as exc:
+            message = str(exc)
+            if message.startswith("controller."):
+                message = f"controllers[{i}]." + message.removeprefix("controller.")
+            raise ConfigError(message) from None
+    data["controllers"] = []
+    seeds = data.get("seeds", 20)
+    if isinstance(seeds, int) and not isinstance(seeds, bool):
+        if seeds < 1:
+            raise ConfigError(f"seeds: must be >= 1, got {seeds}")
+        data["seeds"] = list(range(seeds))
+    cfg = load(ExperimentConfig, {**data, "controllers": [{"name": "pd"}]})
+    return dataclasses.replace(cfg, controllers=tuple(specs))
+
+
+def expand(exp: ExperimentConfig) -> list[Job]:
+    """Every episode of the experiment, in a fixed order (controller, planner, clearance, seed)."""
+    jobs = []
+    for spec in exp.controllers:
+        label = _controller_label(spec, exp.controllers)
+        for planner in exp.planners:
+            for clearance in exp.clearances:
+                scene = SceneConfig(assets=AssetParams(clearance=clearance))
+                for seed in exp.seeds:
+                    cfg = EpisodeConfig(
+                        controller=spec,
+                        planner=planner,
+                        seed=seed,
+                        max_steps=exp.max_steps,
+                        task=exp.task,
+                        success=exp.success,
+                        randomization=exp.randomization,
+                        domain=exp.domain,
+                        scene=scene,
+                    )
+                    blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
+                    key = hashlib.sha256(blob).hexdigest()[:16]
+                    jobs.append(Job(key, spec.name, label, planner, clearance, seed, cfg))
+    return jobs
+
+
+def job_config_mapping(job: Job) -> dict[str, Any]:
+    """Plain data for a worker process (rebuilt there with full validation)."""
+    data = to_dict(job.config)
+    ctrl = data["controller"]
+    data["controller"] = {"name": ctrl["name"], **ctrl["params"]}
+    return data
+
+
+def job_config(data: dict[str, Any]) -> EpisodeConfig:
+    return episode_config_from_mapping(data)

@@ -1,0 +1,162 @@
+"""Experiment files, sweeps (resume, worker-count invariance), statistics and reports."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from experiments.config import expand, experiment_from_mapping, load_experiment
+from experiments.report import wilson_interval
+from experiments.runner import run_sweep
+
+CONFIGS = Path(__file__).resolve().parent.parent / "experiments" / "configs"
+SMALL = """\
+name: small
+controllers: [{name: pd}, {name: impedance, k_pos: [1200.0, 1200.0, 1200.0]}]
+clearances: [0.001]
+seeds: [0, 1]
+max_steps: 2500
+"""
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in row.items() if k != "wall_time_s"} for row in csv.DictReader(fh)]
+
+
+def test_shipped_experiments_load() -> None:
+    for path in sorted(CONFIGS.glob("*.yaml")):
+        exp = load_experiment(path)
+        assert len(expand(exp)) >= 20, path
+    quick = load_experiment(CONFIGS / "quick.yaml")
+    assert {c.name for c in quick.controllers} == {"pd", "impedance", "admittance", "diffik", "mpc"}
+    clearance = load_experiment(CONFIGS / "clearance.yaml")
+    assert min(clearance.clearances) == pytest.approx(5e-5) and max(clearance.clearances) >= 1e-3
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("controllers: [{name: lqg}]", "controllers[0]: unknown controller 'lqg'; known: admittance, diffik"),
+        ("controllers: [pd]\nclearances: [-0.001]", "clearances[0]: must be >= 0 m"),
+        ("clearances: [0.001]", "controllers: missing field"),
+        ("controllers: [pd]\nseeds: many", "seeds: expected a list"),
+        ("controllers: [{name: pd, kp_pos: fast}]", "controllers[0].kp_pos: expected a number"),
+        ("controllers: [pd]\nplanners: [rrt]", "planners[0]: unknown planner 'rrt'"),
+        (
+            "controllers: [pd]\ndomain: {friction_scale: [1.2, 0.8]}",
+            "domain.friction_scale must be [low, high]",
+        ),
+        ("controllers: [pd]\nwarp: 9", "warp: unknown field"),
+    ],
+)
+def test_bad_experiment_files_fail_in_one_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text + "\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "sweep", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("peg-sim: error: ") and message in lines[0], lines
+
+
+def test_jobs_are_keyed_by_their_full_config() -> None:
+    exp = experiment_from_mapping(
+        {"controllers": ["pd", "impedance"], "seeds": 3, "clearances": [0.001, 0.0005]}
+    )
+    jobs = expand(exp)
+    assert len(jobs) == 12 and len({j.key for j in jobs}) == 12
+    assert [j.key for j in jobs] == [j.key for j in expand(exp)]
+
+
+def test_wilson_interval() -> None:
+    lo, hi = wilson_interval(19, 20)
+    assert lo == pytest.approx(0.7639, abs=1e-3) and hi == pytest.approx(0.9911, abs=1e-3)
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_interrupted_sweep_resumes_to_the_same_results(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL)
+    # Uninterrupted, with two workers.
+    run_sweep(load_experiment(config), tmp_path / "whole", workers=2, progress=False)
+    # Interrupted with Ctrl-C after the first finished episode, then resumed with one worker.
+    out = tmp_path / "resumed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "peg_ctrl", "sweep", str(config), "--out", str(out), "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list(out.glob("episodes/*/summary.json")):
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=60)
+    finished = len(list(out.glob("episodes/*/summary.json")))
+    assert 1 <= finished < 4, "the interruption came too late to test resuming"
+    rows = run_sweep(load_experiment(config), out, workers=1, progress=False)
+    assert len(rows) == 4
+    assert _rows(out / "episodes.csv") == _rows(tmp_path / "whole" / "episodes.csv")
+    summary = list(csv.DictReader(open(out / "summary.csv")))
+    assert [s["controller"] for s in summary] == ["pd", "impedance(k_pos=(1200.0, 1200.0, 1200.0))"] or len(
+        summary
+    ) == 2
+    report = (out / "report.md").read_text()
+    assert "## Summary" in report and "success_vs_clearance.png" in report
+    assert (out / "episodes.parquet").stat().st_size > 0
+
+
+def test_a_different_experiment_in_the_same_directory_is_refused(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 2500", "max_steps: 100"))
+    run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False, report=False)
+    config.write_text(SMALL.replace("max_steps: 2500", "max_steps: 101"))
+    with pytest.raises(ValueError, match="different experiment"):
+        run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False)
+
+
+def test_plot_redraws_the_report(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 2500", "max_steps: 100"))
+    out = tmp_path / "out"
+    run_sweep(load_experiment(config), out, workers=1, progress=False, report=False)
+    assert not (out / "report.md").exists()
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "plot", str(out)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    for name in (
+        "report.md",
+        "force_profiles.png",
+        "success_vs_clearance.png",
+        "peak_force.png",
+        "failures.png",
+    ):
+        assert (out / name).stat().st_size > 0
+
+
+def test_ray_backend_gives_the_local_results(tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'peg-ctrl[ray]')")
+    import ray
+
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 2500", "max_steps: 600"))
+    exp = load_experiment(config)
+    run_sweep(exp, tmp_path / "local", workers=2, progress=False, report=False)
+    try:
+        run_sweep(exp, tmp_path / "ray", workers=2, backend="ray", progress=False, report=False)
+    finally:
+        ray.shutdown()
+    assert _rows(tmp_path / "ray" / "episodes.csv") == _rows(tmp_path / "local" / "episodes.csv")
