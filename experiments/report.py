@@ -127,8 +127,8 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
         pts = sorted((s["clearance_m"], s) for s in summary if s["controller"] == ctrl)
         x = np.array([p[0] for p in pts]) * 1e3
         y = np.array([p[1]["success_rate"] for p in pts])
-        lo = y - np.array([p[1]["success_ci95_low"] for p in pts])
-        hi = np.array([p[1]["success_ci95_high"] for p in pts]) - y
+        lo = np.clip(y - np.array([p[1]["success_ci95_low"] for p in pts]), 0.0, None)
+        hi = np.clip(np.array([p[1]["success_ci95_high"] for p in pts]) - y, 0.0, None)
         ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, color=colours[ctrl], label=ctrl)
     ax.set_xscale("log")
     ax.set_xlabel("radial hole clearance [mm]")

@@ -188,8 +188,8 @@ def run_sweep(
         stream = runner(tasks, workers, address) if backend == "ray" else runner(tasks, workers)
         for result in stream:
             successes += result["status"] == "success"
+            bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
             bar.update(1)
-            bar.set_postfix(success=f"{successes}/{bar.n - done_before}", refresh=False)
     rows = collect_rows(jobs, out_dir)
     write_tables(rows, out_dir)
     if report:

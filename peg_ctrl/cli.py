@@ -21,6 +21,13 @@ class UsageError(Exception):
     """A mistake in the user's input; reported in one line with exit code 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """Argument errors in one line (``peg-sim: error: ...``), exit code 2; ``--help`` for usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"peg-sim: error: {message} (see '{self.prog} --help')\n")
+
+
 def _cmd_model(args: argparse.Namespace) -> int:
     from peg_ctrl.scene import export_scene
 
@@ -247,9 +254,7 @@ def _pending(name: str) -> Callable[[argparse.Namespace], int]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="peg-sim", description="Peg-in-hole simulation and controller research in MuJoCo."
-    )
+    parser = _Parser(prog="peg-sim", description="Peg-in-hole simulation and controller research in MuJoCo.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("model", help="write the compiled scene as scene.xml plus meshes")

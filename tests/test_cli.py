@@ -32,7 +32,7 @@ def test_model_export(tmp_path: Path) -> None:
 
 def test_bench_writes_json(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
-    assert main(["bench", "--out", str(out), "--steps", "200", "--repeats", "1"]) == 0
+    assert main(["bench", "--controller", "pd", "--out", str(out), "--steps", "200", "--repeats", "1"]) == 0
     result = json.loads(out.read_text())
     (entry,) = result["controllers"]
     assert entry["controller"] == "pd"
@@ -71,13 +71,20 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["bench", "--controller", "nope"], "unknown controller 'nope'; known: pd"),
+        (
+            ["bench", "--controller", "nope"],
+            "unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
+        ),
+        (["bench", "--steps", "many"], "argument --steps: invalid int value: 'many'"),
         (["bench", "--steps", "5"], "--steps must be >= 100"),
         (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
-        (["sweep"], "'sweep' is not available"),
+        (["sweep"], "the following arguments are required: config"),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
-        (["run", "--controller", "nope"], "unknown controller 'nope'; known: pd"),
+        (
+            ["run", "--controller", "nope"],
+            "unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
+        ),
         (["run", "--planner", "warp"], "unknown planner 'warp'; known: fixed_speed, ruckig"),
         (["run", "--seed", "-3"], "seed must be >= 0"),
         (["run", "--config", "missing.yaml"], "does not exist"),

@@ -152,7 +152,7 @@ def test_non_finite_state_raises(sim: Simulation) -> None:
 
 
 def test_registry_errors_list_known_names(model: mujoco.MjModel) -> None:
-    with pytest.raises(UnknownController, match="known: pd"):
+    with pytest.raises(UnknownController, match="known: admittance, diffik, impedance, mpc, pd"):
         make_controller("nope", model)
     with pytest.raises(ValueError, match="kp_pos"):
         make_controller("pd", model, kp_pos=-1.0)
