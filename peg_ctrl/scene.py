@@ -279,37 +279,36 @@ def _add_cameras_and_lights(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     light.dir = [0.0, 0.2, -1.0]
     light.castshadow = True
     hx, hy = cfg.hole_xy
-    cam = spec.worldbody.add_camera()
-    cam.name = "insertion"
     # Look at the hole mouth from the side the fingers point to after the turn (+Y), so the
     # gripper's body (towards -Y) does not hide the insertion.
-    target = np.array([hx - 0.02, hy, 0.06])
-    eye = np.array([hx + 0.20, hy + 0.30, 0.20])
-    forward = target - eye
+    _add_look_at_camera(
+        spec, "insertion", eye=(hx + 0.20, hy + 0.30, 0.20), target=(hx - 0.02, hy, 0.06), fovy=50.0
+    )
+    _add_look_at_camera(spec, "overview", eye=(0.0, -0.75, 0.45), target=(0.0, 0.0, 0.08), fovy=45.0)
+
+
+def _add_look_at_camera(
+    spec: mujoco.MjSpec,
+    name: str,
+    *,
+    eye: tuple[float, float, float],
+    target: tuple[float, float, float],
+    fovy: float,
+) -> None:
+    """A fixed camera at ``eye`` [m] looking at ``target`` [m], world Z up."""
+    forward = np.subtract(target, eye)
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
-    cam.pos = list(eye)
-    # A camera looks along its -Z with +Y up.
-    rot = np.column_stack([right, up, -forward])
     quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, rot.flatten())
-    cam.quat = list(quat)
-    cam.fovy = 50.0
-    overview = spec.worldbody.add_camera()
-    overview.name = "overview"
-    target = np.array([0.0, 0.0, 0.08])
-    eye = np.array([0.0, -0.75, 0.45])
-    forward = target - eye
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    overview.pos = list(eye)
+    # A MuJoCo camera looks along its -Z with +Y up.
     mujoco.mju_mat2Quat(quat, np.column_stack([right, up, -forward]).flatten())
-    overview.quat = list(quat)
-    overview.fovy = 45.0
+    cam = spec.worldbody.add_camera()
+    cam.name = name
+    cam.pos = list(eye)
+    cam.quat = list(quat)
+    cam.fovy = fovy
 
 
 # How each body group is named to a contact sensor: (object type, name).
