@@ -40,4 +40,4 @@ def test_calibration_rejects_non_monotonic_tables() -> None:
 def test_recalibration_reproduces_the_shipped_table(model) -> None:
     fresh = jaw.calibrate(model)
     shipped = jaw.load_default()
-    np.testing.assert_allclose(fresh.sep_m, shipped.sep_m, atol=1e-9)
+    np.testing.assert_allclose(fresh.sep_m, shipped.sep_m, atol=1e-6)  # 1 um: regenerate if the scene changes
