@@ -110,8 +110,8 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
                 alpha=0.2,
             )
     for ax, title in zip(axes, ("peg-block contact force", "peg-table contact force"), strict=True):
-        ax.set_title(title + " around the release (median, 10-90 %)")
-        ax.set_xlabel("time from the start of the release phase [s]")
+        ax.set_title(title + " (median, 10-90 %)")
+        ax.set_xlabel("time from the start of the insert (or else release) phase [s]")
         ax.set_ylabel("net force [N]")
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
