@@ -32,6 +32,10 @@ PAIRS: tuple[tuple[str, str], ...] = tuple(
 PEG_PARTNERS = ("block", "gripper", "table")  # groups the peg's penetration is tracked against
 
 
+_NO_WRENCH = np.zeros(6)
+_NO_WRENCH.setflags(write=False)  # a shared default must not be writable
+
+
 class ControlState(NamedTuple):
     """Gripper state at time ``t`` [s].
 
@@ -48,7 +52,7 @@ class ControlState(NamedTuple):
     v_world: NDArray[np.float64]
     omega_body: NDArray[np.float64]
     jaw_sep_m: float
-    ft_wrench: NDArray[np.float64] = np.zeros(6)
+    ft_wrench: NDArray[np.float64] = _NO_WRENCH
 
 
 @dataclasses.dataclass(frozen=True)
