@@ -1,27 +1,40 @@
 """Controllers for the peg-in-hole gripper, selected by name from one registry.
 
 Every controller drives the same actuators (3 slide forces, 3 ball-joint torques, the jaw)
-through the :class:`~controllers.base.Controller` protocol.
+through the :class:`~peg_ctrl.controllers.base.Controller` protocol. Each is a config class (a
+:class:`~peg_ctrl.controllers.base.ControllerConfig`, naming the controller) and a controller
+class built from it (a :class:`~peg_ctrl.controllers.base.ControllerBase`, writing only its
+control law). :data:`REGISTRY` maps each config class's ``name`` to the class.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import mujoco
 
-from controllers.admittance import AdmittanceConfig, AdmittanceController
-from controllers.base import Controller, ControlOutput, Diagnostics
-from controllers.diffik import DiffIKConfig, DiffIKController
-from controllers.impedance import ImpedanceConfig, ImpedanceController
-from controllers.mpc import MPCConfig, MPCController
-from controllers.pd import PDConfig, PDController
+from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceController
+from peg_ctrl.controllers.base import (
+    Controller,
+    ControllerBase,
+    ControllerConfig,
+    ControlOutput,
+    Diagnostics,
+    Effort,
+)
+from peg_ctrl.controllers.diffik import DiffIKConfig, DiffIKController
+from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
+from peg_ctrl.controllers.mpc import MPCConfig, MPCController
+from peg_ctrl.controllers.pd import PDConfig, PDController
+from peg_ctrl.errors import ConfigError, UnknownComponent
 
 __all__ = [
     "Controller",
+    "ControllerBase",
+    "ControllerConfig",
     "ControlOutput",
     "Diagnostics",
+    "Effort",
     "PDConfig",
     "PDController",
     "AdmittanceConfig",
@@ -34,33 +47,41 @@ __all__ = [
     "ImpedanceController",
     "REGISTRY",
     "UnknownController",
+    "controller_names",
     "make_controller",
 ]
 
-# name -> (config class, factory(model, config) -> controller)
-REGISTRY: dict[str, tuple[type, Callable[..., Controller]]] = {
-    "pd": (PDConfig, PDController),
-    "impedance": (ImpedanceConfig, ImpedanceController),
-    "admittance": (AdmittanceConfig, AdmittanceController),
-    "diffik": (DiffIKConfig, DiffIKController),
-    "mpc": (MPCConfig, MPCController),
+#: Controller name -> its config class (whose ``build(model)`` makes the controller).
+REGISTRY: dict[str, type[ControllerConfig]] = {
+    cfg.name: cfg for cfg in (PDConfig, ImpedanceConfig, AdmittanceConfig, DiffIKConfig, MPCConfig)
 }
 
-
-class UnknownController(ValueError):
-    """A controller name that is not registered; the message lists the known names."""
-
-    def __init__(self, name: str) -> None:
-        super().__init__(f"unknown controller {name!r}; known: {', '.join(sorted(REGISTRY))}")
+#: Kept for callers that catch it by its old name.
+UnknownController = UnknownComponent
 
 
-def make_controller(name: str, model: mujoco.MjModel, **params: Any) -> Controller:
-    """Build the controller registered as ``name`` with its config fields overridden by ``params``."""
-    if name not in REGISTRY:
-        raise UnknownController(name)
-    config_cls, factory = REGISTRY[name]
-    try:
-        config = config_cls(**params)
-    except TypeError as exc:
-        raise ValueError(f"bad parameter for controller {name!r}: {exc}") from None
-    return factory(model, config)
+def controller_names() -> list[str]:
+    """The registered controller names, sorted."""
+    return sorted(REGISTRY)
+
+
+def make_controller(
+    config_or_name: ControllerConfig | str, model: mujoco.MjModel, **params: Any
+) -> Controller:
+    """Build a controller for ``model`` from its config, or from its name and config fields.
+
+    ``make_controller("pd", model, kp_pos=2000.0)`` is
+    ``ControllerConfig.select({"name": "pd", "kp_pos": 2000.0}).build(model)``.
+
+    Raises:
+        UnknownComponent: for a name not in :data:`REGISTRY` (the message lists the known ones).
+        ConfigError: for a bad field name or value (named ``controller.<field>``), or fields
+            passed together with a config.
+    """
+    if isinstance(config_or_name, ControllerConfig):
+        if params:
+            raise ConfigError(
+                f"controller: pass fields in the config, not as arguments: {', '.join(sorted(params))}"
+            )
+        return config_or_name.build(model)
+    return ControllerConfig.select({"name": config_or_name, **params}).build(model)

@@ -8,28 +8,35 @@ simulated force/torque sensor at the gripper mount, on top of the stiff referenc
 The acceleration term uses the commanded acceleration of the reference (zero for rest-to-rest
 holds); what is left (accelerations, the held peg's 16 g) stays below the deadband. Only the
 translation yields; the orientation is tracked stiffly.
+
+The inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
+admittance's by :meth:`~peg_ctrl.controllers.base.ControllerConfig.scaled`); it runs at the
+admittance's ``control_dt`` (``inner.control_dt`` is replaced by it), and only its control law
+is called, so saturation and packing happen once.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from typing import ClassVar
 
 import mujoco
 import numpy as np
 
-from controllers.base import ControlOutput, Diagnostics
-from controllers.pd import PDConfig, PDController
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
+from peg_ctrl.controllers.pd import PDConfig, PDController
+from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.state import ControlState
 
 __all__ = ["AdmittanceConfig", "AdmittanceController"]
 
 
-@dataclasses.dataclass(frozen=True)
-class AdmittanceConfig:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class AdmittanceConfig(ControllerConfig):
+    """Virtual mass-spring-damper of the command offset (``control_dt`` [s] from the base class)."""
+
     name: ClassVar[str] = "admittance"
     GAINS: ClassVar[tuple[str, ...]] = ("stiffness",)
     mass: float = 2.0  # virtual mass [kg]
@@ -38,26 +45,38 @@ class AdmittanceConfig:
     deadband: float = 1.0  # measured force below this is ignored [N]
     filter_hz: float = 20.0  # low-pass on the measured force [Hz]
     max_offset: float = 0.02  # the command never yields further than this [m]
-    control_dt: float = 0.001  # [s]
+    inner: PDConfig = PDConfig()  # tracks the shifted target; its control_dt is replaced by ours
 
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"admittance.{f.name} must be finite and > 0, got {value!r}")
+    def build(self, model: mujoco.MjModel) -> AdmittanceController:
+        return AdmittanceController(model, self)
 
 
-class AdmittanceController:
+class AdmittanceController(ControllerBase[AdmittanceConfig]):
+    """Admittance on top of the reference PD. See the module docstring.
+
+    Attributes:
+        offset: (3,) Current yield of the command, world frame [m].
+        offset_rate: (3,) Its rate [m/s].
+        force_filtered: (3,) Low-passed external force, world frame [N].
+    """
+
     name = "admittance"
 
-    def __init__(self, model: mujoco.MjModel, config: AdmittanceConfig | None = None) -> None:
-        self.config = config or AdmittanceConfig()
-        self.control_dt = self.config.control_dt
-        self.inner = PDController(model, PDConfig(control_dt=self.config.control_dt))
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: AdmittanceConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
+        super().__init__(model, config or AdmittanceConfig(), jaw_calibration=jaw_calibration)
+        c = self.config
+        self.inner = PDController(
+            model, dataclasses.replace(c.inner, control_dt=c.control_dt), jaw_calibration=self._jaw
+        )
         mount = model.body("gripper_mount").id
         self._mass_below = float(model.body_subtreemass[mount])
         self._gravity = model.opt.gravity.copy()
-        c = self.config
         self._d = 2.0 * c.damping_ratio * math.sqrt(c.stiffness * c.mass)
         self._alpha = 1.0 - math.exp(-2.0 * math.pi * c.filter_hz * c.control_dt)
         self.reset_offset()
@@ -68,7 +87,7 @@ class AdmittanceController:
         self.force_filtered = np.zeros(3)
         self._prev_v_ref: np.ndarray | None = None
 
-    def reset(self, state: ControlState) -> None:
+    def _reset(self, state: ControlState) -> None:
         self.reset_offset()
         self.inner.reset(state)
 
@@ -80,8 +99,7 @@ class AdmittanceController:
         mujoco.mju_rotVecQuat(f_world, f_site, state.quat_world)
         return self._mass_below * (accel_ref - self._gravity) - f_world
 
-    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
-        t0 = time.perf_counter()
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         c = self.config
         dt = c.control_dt
         v_ref = np.asarray(target.v_world)
@@ -106,5 +124,4 @@ class AdmittanceController:
             target.omega_body,
             target.jaw_sep_m,
         )
-        out = self.inner.compute(state, shifted)
-        return ControlOutput(out.ctrl, Diagnostics(solve_time_s=time.perf_counter() - t0))
+        return self.inner.control_law(state, shifted)

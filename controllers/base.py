@@ -1,19 +1,52 @@
-"""The interface every controller implements."""
+"""The controller template: one config base class, one controller base class.
+
+A controller is a frozen :class:`ControllerConfig` subclass (its gains, limits and period, with a
+registered ``name``) plus a :class:`ControllerBase` subclass that writes only its control law.
+The base class does the rest once, for every controller: timing, saturation to the actuator
+ranges, the jaw separation -> actuator byte map, the finiteness check and actuator packing.
+
+Every controller satisfies the :class:`Controller` protocol: it gets the model at construction
+and never steps or forwards the simulation; the episode loop owns time.
+"""
 
 from __future__ import annotations
 
+import abc
+import dataclasses
 import math
-from collections.abc import Sequence
-from typing import NamedTuple, Protocol
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
 
 import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownComponent
+from peg_ctrl.jaw import JawCalibration, load_default
 from peg_ctrl.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
 from peg_ctrl.state import ControlState
+from peg_ctrl.timing import control_decimation
 
-__all__ = ["Controller", "ControlOutput", "Diagnostics", "ActuatorMap", "check_target"]
+__all__ = [
+    "Controller",
+    "ControllerBase",
+    "ControllerConfig",
+    "ControlOutput",
+    "Diagnostics",
+    "Effort",
+    "ActuatorMap",
+    "InvalidField",
+    "check_target",
+    "check_positive",
+    "check_multiple",
+]
+
+#: The controller an experiment file gets when its ``controller`` mapping names none.
+DEFAULT_CONTROLLER = "pd"
+
+_C = TypeVar("_C", bound="ControllerConfig")
+_Cfg = TypeVar("_Cfg", bound="ControllerConfig")
 
 
 class Diagnostics(NamedTuple):
@@ -34,6 +67,20 @@ class ControlOutput(NamedTuple):
     diagnostics: Diagnostics = Diagnostics()
 
 
+class Effort(NamedTuple):
+    """What a control law returns: the base's generalised forces, before saturation.
+
+    ``force_world`` (3,) slide forces [N] (world axes); ``torque_body`` (3,) ball-joint torques
+    [N m] (gripper frame); ``status`` and ``iterations`` of the law's own solver, if any
+    (``"hold"`` between the solves of a slower-rate solver).
+    """
+
+    force_world: Sequence[float]
+    torque_body: Sequence[float]
+    status: str = "ok"
+    iterations: int = 0
+
+
 class Controller(Protocol):
     """A controller gets the model at construction and never steps or forwards the simulation.
 
@@ -50,7 +97,10 @@ class Controller(Protocol):
 
 
 class ActuatorMap:
-    """Indices of the slide, ball and jaw actuators in ``data.ctrl``, resolved once."""
+    """Indices of the slide, ball and jaw actuators in ``data.ctrl``, resolved once.
+
+    ``slide_limit`` (3,) [N] and ``ball_limit`` (3,) [N m] are the symmetric actuator ranges.
+    """
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.nu = model.nu
@@ -76,8 +126,11 @@ class ActuatorMap:
 
 
 def check_target(target: GripperTarget) -> None:
-    """Reject a target with non-finite entries (``GripperTarget`` validates on construction,
-    but arrays are mutable, so controllers re-check cheaply)."""
+    """Raise :class:`CommandError` naming the entries if ``target`` has a non-finite one.
+
+    ``GripperTarget`` validates on construction, but ``GripperTarget.trusted`` does not, so the
+    controllers re-check cheaply (one sum) where it matters.
+    """
     total = (
         float(target.p_world.sum())
         + float(target.quat_world.sum())
@@ -86,7 +139,213 @@ def check_target(target: GripperTarget) -> None:
         + float(target.jaw_sep_m)
     )
     if not math.isfinite(total):  # a NaN or inf anywhere makes the sum non-finite
-        raise ValueError(
+        raise CommandError(
             f"target must be finite, got p_world={target.p_world.tolist()}, "
-            f"quat_world={target.quat_world.tolist()}, jaw_sep_m={target.jaw_sep_m}"
+            f"quat_world={target.quat_world.tolist()}, v_world={target.v_world.tolist()}, "
+            f"omega_body={target.omega_body.tolist()}, jaw_sep_m={target.jaw_sep_m}"
         )
+
+
+# -- configs -----------------------------------------------------------------------------------
+
+
+class InvalidField(ConfigError):
+    """A config field with a bad value: ``<owner>.<field>: <reason>``.
+
+    ``ControllerConfig.select`` re-raises it under the dotted path the config was loaded from
+    (``controller.kp_pos``), which ``__post_init__`` cannot know.
+    """
+
+    def __init__(self, owner: str, field: str, reason: str) -> None:
+        super().__init__(f"{owner}.{field}: {reason}")
+        self.owner = owner
+        self.field = field
+        self.reason = reason
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_positive(config: ControllerConfig, names: Iterable[str]) -> None:
+    """Require each named field to be a finite number > 0, or a non-empty tuple of them.
+
+    Raises:
+        InvalidField: naming ``<config.name>.<field>``.
+    """
+    for field in names:
+        value = getattr(config, field)
+        values = value if isinstance(value, tuple) else (value,)
+        if not values or not all(_is_number(v) and math.isfinite(v) and v > 0 for v in values):
+            raise InvalidField(config.name, field, f"must be finite and > 0, got {value!r}")
+
+
+def check_multiple(config: ControllerConfig, field: str) -> int:
+    """Require field ``field`` (a period [s]) to be a whole multiple of ``config.control_dt``.
+
+    Returns the ratio. Raises :class:`InvalidField` naming ``<config.name>.<field>``.
+    """
+    value = getattr(config, field)
+    try:
+        return control_decimation(value, config.control_dt)
+    except ConfigError:
+        raise InvalidField(
+            config.name, field, f"must be a whole multiple of control_dt {config.control_dt} s, got {value!r}"
+        ) from None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ControllerConfig:
+    """Base of every controller's config: a frozen dataclass naming its controller.
+
+    Subclasses set ``name`` (the registry key) and ``GAINS`` (the fields that ``gain_scale``
+    perturbs, float or tuple-valued), add their fields with units in comments, and implement
+    :meth:`build`. Every numeric field (a number or a tuple of numbers) must be finite and > 0;
+    ``__post_init__`` checks that, subclasses add their own checks after calling it.
+    """
+
+    name: ClassVar[str]
+    GAINS: ClassVar[tuple[str, ...]] = ()
+    control_dt: float = 0.001  # control period [s], a whole multiple of the physics timestep
+
+    def __post_init__(self) -> None:
+        numeric = []
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, (bool, str, ControllerConfig)):
+                continue
+            numeric.append(f.name)
+        check_positive(self, numeric)
+
+    def build(self, model: mujoco.MjModel) -> Controller:
+        """The controller this config describes, for ``model``."""
+        raise NotImplementedError(f"{type(self).__name__} does not build a controller")
+
+    def scaled(self: _C, factor: float) -> _C:
+        """A copy with every ``GAINS`` field, and every nested controller config's, times ``factor``.
+
+        Tuple-valued gains are scaled element-wise; ``factor == 1.0`` returns an equal config.
+        """
+        if not (_is_number(factor) and math.isfinite(factor) and factor > 0):
+            raise ConfigError(f"gain scale factor must be finite and > 0, got {factor!r}")
+        changes: dict[str, Any] = {}
+        for field in self.GAINS:
+            value = getattr(self, field)
+            changes[field] = tuple(v * factor for v in value) if isinstance(value, tuple) else value * factor
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, ControllerConfig):
+                changes[f.name] = value.scaled(factor)
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def select(cls, data: object, *, prefix: str = "controller.") -> ControllerConfig:
+        """The config named by ``data``: a name, a mapping ``{"name": ..., <fields>}`` or a config.
+
+        On the base class the name picks the class from ``peg_ctrl.controllers.REGISTRY``; a
+        missing name means ``"pd"``. On a subclass (a composite's ``inner`` field) the name may be
+        left out and must otherwise name that class. Fields load with
+        :func:`peg_ctrl.config.load`.
+
+        Raises:
+            UnknownComponent: for a name not in the registry (the message lists the known ones).
+            ConfigError: for a bad field name or value, naming it as ``<prefix><field>``.
+        """
+        from peg_ctrl.config import load
+        from peg_ctrl.controllers import REGISTRY  # here: the registry imports this module
+
+        where = prefix.rstrip(".") or "controller"
+        if isinstance(data, ControllerConfig):
+            if not isinstance(data, cls):
+                raise ConfigError(f"{where}: expected a {cls.__name__}, got {type(data).__name__}")
+            return data
+        if isinstance(data, str):
+            data = {"name": data}
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{where}: expected a controller name or a mapping, got {data!r}")
+        fields = dict(data)
+        default = cls.__dict__.get("name", DEFAULT_CONTROLLER)
+        name = fields.pop("name", default)
+        if not isinstance(name, str):
+            raise ConfigError(f"{prefix}name: expected a string, got {name!r}")
+        if name not in REGISTRY:
+            raise UnknownComponent("controller", name, REGISTRY, where=prefix.rstrip("."))
+        config_cls = REGISTRY[name]
+        if not issubclass(config_cls, cls):
+            raise ConfigError(f"{prefix}name: expected {default!r}, got {name!r}")
+        try:
+            return load(config_cls, fields, prefix=prefix)
+        except InvalidField as exc:
+            raise ConfigError(f"{prefix}{exc.field}: {exc.reason}") from None
+
+
+# -- controllers -------------------------------------------------------------------------------
+
+
+def _clip(value: float, limit: float) -> float:
+    return limit if value > limit else (-limit if value < -limit else value)
+
+
+class ControllerBase(abc.ABC, Generic[_Cfg]):
+    """Template for every controller: subclasses implement :meth:`control_law` (and ``_reset``).
+
+    :meth:`compute` times the call, runs the law, checks the result is finite, saturates it to
+    the actuator ranges, maps the jaw separation to its actuator byte and packs ``ctrl``.
+
+    Attributes:
+        config: The controller's config.
+        control_dt: Control period in [s] (``config.control_dt``).
+    """
+
+    name: ClassVar[str]
+
+    def __init__(
+        self, model: mujoco.MjModel, config: _Cfg, *, jaw_calibration: JawCalibration | None = None
+    ) -> None:
+        self.config: _Cfg = config
+        self.control_dt = config.control_dt
+        self._act = ActuatorMap(model)
+        self._jaw = jaw_calibration or load_default()
+        self._slide_lim = tuple(float(v) for v in self._act.slide_limit)
+        self._ball_lim = tuple(float(v) for v in self._act.ball_limit)
+        self._jaw_cache = (math.nan, 0.0)  # (separation [m], byte): targets hold it for long
+
+    def reset(self, state: ControlState) -> None:
+        """Start an episode from ``state``: clears the controller's memory."""
+        self._jaw_cache = (math.nan, 0.0)
+        self._reset(state)
+
+    def _reset(self, state: ControlState) -> None:
+        """Clear the control law's own memory (filters, integrators, warm starts)."""
+
+    @abc.abstractmethod
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+        """Slide forces and ball torques for ``state`` tracking ``target``, before saturation."""
+
+    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        """Actuator controls for ``state`` tracking ``target``. Do not override.
+
+        Raises:
+            CommandError: if the control is non-finite because the target is.
+            DivergenceError: if the control is non-finite otherwise (a diverged state).
+        """
+        t0 = time.perf_counter()
+        effort = self.control_law(state, target)
+        force, torque = effort.force_world, effort.torque_body
+        jaw_sep = float(target.jaw_sep_m)
+        if jaw_sep != self._jaw_cache[0]:
+            self._jaw_cache = (jaw_sep, self._jaw.sep_to_byte(jaw_sep))
+        jaw_byte = self._jaw_cache[1]
+        # Before saturation, which would turn an infinite effort into a finite one.
+        if not math.isfinite(sum(force) + sum(torque) + jaw_byte):
+            check_target(target)  # names the bad entry
+            raise DivergenceError(f"non-finite control from state at t={state.t}: {state}")
+        fl, tl = self._slide_lim, self._ball_lim
+        fx, fy, fz = force
+        tx, ty, tz = torque
+        ctrl = self._act.pack(
+            (_clip(fx, fl[0]), _clip(fy, fl[1]), _clip(fz, fl[2])),
+            (_clip(tx, tl[0]), _clip(ty, tl[1]), _clip(tz, tl[2])),
+            jaw_byte,
+        )
+        return ControlOutput(ctrl, Diagnostics(time.perf_counter() - t0, effort.status, effort.iterations))

@@ -9,72 +9,93 @@ setpoint, with the IK velocity as feed-forward.
 mink runs on the robot-only model (base stack + gripper, fingers held open); the ball joint is
 unlimited (mink's configuration limit would otherwise treat its range as a total-angle bound).
 Limits are built once, not per call.
+
+The inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
+IK costs by :meth:`~peg_ctrl.controllers.base.ControllerConfig.scaled`); it runs at the
+controller's ``control_dt`` (``inner.control_dt`` is replaced by it), and only its control law
+is called, so saturation and packing happen once.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import time
 from typing import ClassVar
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.base import ControlOutput, Diagnostics
-from controllers.pd import PDConfig, PDController
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.base import (
+    ControllerBase,
+    ControllerConfig,
+    Effort,
+    InvalidField,
+    check_multiple,
+    check_target,
+)
+from peg_ctrl.controllers.pd import PDConfig, PDController
+from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS, build_robot_spec
-from peg_ctrl.sim import control_decimation
 from peg_ctrl.state import ControlState
 
 __all__ = ["DiffIKConfig", "DiffIKController"]
 
 
-@dataclasses.dataclass(frozen=True)
-class DiffIKConfig:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DiffIKConfig(ControllerConfig):
+    """IK task weights, limits and rate (``control_dt`` [s], the inner PD's, from the base class)."""
+
     name: ClassVar[str] = "diffik"
     GAINS: ClassVar[tuple[str, ...]] = ("position_cost", "orientation_cost")
     ik_dt: float = 0.01  # IK period [s] (100 Hz), a whole multiple of control_dt
     solver: str = "daqp"  # any qpsolvers solver: daqp (default), osqp, ...
-    position_cost: float = 1.0
-    orientation_cost: float = 1.0
+    position_cost: float = 1.0  # frame task weight on the position error
+    orientation_cost: float = 1.0  # frame task weight on the orientation error
     damping_cost: float = 1e-3  # damping task weight on every DoF
     lm_damping: float = 1e-6  # Levenberg-Marquardt damping of the frame task
     v_max: float = 0.5  # slide velocity limit [m/s]
     omega_max: float = 1.5  # ball joint velocity limit [rad/s]
-    control_dt: float = 0.001  # inner PD period [s]
+    inner: PDConfig = PDConfig()  # tracks the IK setpoint; its control_dt is replaced by ours
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, str):
-                continue
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"diffik.{f.name} must be finite and > 0, got {value!r}")
-        control_decimation(self.ik_dt, self.control_dt)
+        super().__post_init__()
+        check_multiple(self, "ik_dt")
         import qpsolvers
 
         if self.solver not in qpsolvers.available_solvers:
-            raise ValueError(
-                f"diffik.solver {self.solver!r} is not installed; available: "
-                f"{', '.join(sorted(qpsolvers.available_solvers))}"
+            raise InvalidField(
+                self.name,
+                "solver",
+                f"{self.solver!r} is not installed; available: "
+                f"{', '.join(sorted(qpsolvers.available_solvers))}",
             )
 
+    def build(self, model: mujoco.MjModel) -> DiffIKController:
+        return DiffIKController(model, self)
 
-class DiffIKController:
+
+class DiffIKController(ControllerBase[DiffIKConfig]):
+    """Differential IK (mink) at ``ik_dt``, tracked by the reference PD. See the module docstring."""
+
     name = "diffik"
 
-    def __init__(self, model: mujoco.MjModel, config: DiffIKConfig | None = None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: DiffIKConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
         import mink
 
+        super().__init__(model, config or DiffIKConfig(), jaw_calibration=jaw_calibration)
         self._mink = mink
-        self.config = config or DiffIKConfig()
         c = self.config
-        self.control_dt = c.control_dt
-        self._every = control_decimation(c.ik_dt, c.control_dt)
-        self.inner = PDController(model, PDConfig(control_dt=c.control_dt))
+        self._every = check_multiple(c, "ik_dt")
+        self.inner = PDController(
+            model, dataclasses.replace(c.inner, control_dt=c.control_dt), jaw_calibration=self._jaw
+        )
         self.robot = build_robot_spec().compile()
         self.configuration = mink.Configuration(self.robot)
         self.frame_task = mink.FrameTask(
@@ -92,9 +113,8 @@ class DiffIKController:
         self._q = self.robot.qpos0.copy()
         self._v = np.zeros(self.robot.nv)
         self._count = 0
-        self.last_status = "ok"
 
-    def reset(self, state: ControlState) -> None:
+    def _reset(self, state: ControlState) -> None:
         self._q = self.robot.qpos0.copy()
         self._q[:3] = state.p_world
         self._q[3:7] = state.quat_world
@@ -119,12 +139,10 @@ class DiffIKController:
             limits=self.limits,
         )
 
-    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
-        t0 = time.perf_counter()
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         status = "hold"
         if self._count % self._every == 0:
-            if not (np.all(np.isfinite(target.p_world)) and np.all(np.isfinite(target.quat_world))):
-                raise ValueError(f"target must be finite, got p_world={target.p_world.tolist()}")
+            check_target(target)  # a failed QP would otherwise hide a non-finite target
             try:
                 self._v = self.ik_velocity(self._q, target)
                 status = "ok"
@@ -137,7 +155,5 @@ class DiffIKController:
         setpoint = GripperTarget.trusted(
             self._q[:3], self._q[3:7], self._v[:3], self._v[3:6], target.jaw_sep_m
         )
-        out = self.inner.compute(state, setpoint)
-        return ControlOutput(
-            out.ctrl, Diagnostics(time.perf_counter() - t0, status, 1 if status == "ok" else 0)
-        )
+        effort = self.inner.control_law(state, setpoint)
+        return Effort(effort.force_world, effort.torque_body, status, 1 if status == "ok" else 0)

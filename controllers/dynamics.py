@@ -1,10 +1,10 @@
 """Rigid-body dynamics of the base stack from Pinocchio, built from the scene's own MJCF.
 
 The robot-only MJCF (``peg_ctrl.scene.export_robot``: base stack + gripper, every inertial
-written explicitly) is read with ``pinocchio.buildModelFromMJCF``; the finger joints are then
-locked at their open configuration (``buildReducedModel``), leaving the 6 base DoF: three slides
-and the ball joint. Pinocchio orders a spherical joint's quaternion ``[x, y, z, w]``; MuJoCo
-``[w, x, y, z]`` — converted here. Velocities agree: the ball joint's is in the body frame.
+written explicitly) is written to a temporary directory, read with ``pinocchio.buildModelFromMJCF``
+and deleted again; the finger joints are then locked at their open configuration
+(``buildReducedModel``), leaving the 6 base DoF: three slides and the ball joint. Pinocchio
+orders a spherical joint's quaternion ``[x, y, z, w]``; MuJoCo ``[w, x, y, z]`` — converted here. Velocities agree: the ball joint's is in the body frame.
 
 Pinocchio's MJCF reader places hinge joints at their body's origin and ignores a joint ``pos``
 offset (the 2F-85's followers have one), so the full models agree only with the fingers open;
@@ -24,9 +24,9 @@ from peg_ctrl.scene import PINCH_SITE, SceneConfig, export_robot
 __all__ = ["BaseDynamics", "robot_mjcf", "to_pinocchio_q"]
 
 
-def robot_mjcf(scene: SceneConfig | None = None) -> Path:
-    """Write the robot-only MJCF to a fresh temporary directory and return its path."""
-    return export_robot(Path(tempfile.mkdtemp(prefix="peg_ctrl_robot_")), scene)
+def robot_mjcf(out_dir: Path, scene: SceneConfig | None = None) -> Path:
+    """Write the robot-only MJCF into ``out_dir`` (meshes referenced by absolute path); its path."""
+    return export_robot(Path(out_dir), scene)
 
 
 def _pinch_in_root(path: Path):  # type: ignore[no-untyped-def]
@@ -59,8 +59,11 @@ class BaseDynamics:
         import pinocchio as pin
 
         self._pin = pin
-        path = robot_mjcf(scene)
-        full = pin.buildModelFromMJCF(str(path))
+        # Neither model keeps a reference to the file once read, so nothing is left in /tmp.
+        with tempfile.TemporaryDirectory(prefix="peg_ctrl_robot_") as tmp:
+            path = robot_mjcf(Path(tmp), scene)
+            full = pin.buildModelFromMJCF(str(path))
+            pinch_in_root = _pinch_in_root(path)
         self.full_model = full
         finger_joints = [j for j in range(1, full.njoints) if full.names[j].startswith("2f85/")]
         q_ref = pin.neutral(full)
@@ -68,13 +71,12 @@ class BaseDynamics:
         # Pinocchio's MJCF reader misplaces sites in welded child bodies (the 2F-85's pinch
         # lands at the base_mount origin), so the pinch frame is added from MuJoCo's placement.
         self.pinch_frame = self.model.addFrame(
-            pin.Frame("pinch_point", 1, 0, _pinch_in_root(path), pin.FrameType.OP_FRAME)
+            pin.Frame("pinch_point", 1, 0, pinch_in_root, pin.FrameType.OP_FRAME)
         )
         self.data = self.model.createData()
         if self.model.nv != 6:
             raise RuntimeError(f"expected a 6-DoF base after locking the fingers, got nv={self.model.nv}")
         self._q = np.zeros(7)
-        self.mjcf_path = path
 
     def _config(self, p_world: NDArray[np.float64], quat_world: NDArray[np.float64]) -> NDArray[np.float64]:
         q = self._q

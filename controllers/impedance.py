@@ -15,52 +15,55 @@ taken from Pinocchio and checked in the tests.
 from __future__ import annotations
 
 import dataclasses
-import math
-import time
 from typing import ClassVar
 
 import mujoco
 import numpy as np
 
-from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
-from controllers.dynamics import BaseDynamics
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.jaw import load_default
+from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort, InvalidField
+from peg_ctrl.controllers.dynamics import BaseDynamics
+from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS
 from peg_ctrl.state import ControlState
 
 __all__ = ["ImpedanceConfig", "ImpedanceController"]
 
 
-@dataclasses.dataclass(frozen=True)
-class ImpedanceConfig:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ImpedanceConfig(ControllerConfig):
+    """Stiffness per axis and damping ratio (``control_dt`` [s] from the base class)."""
+
     name: ClassVar[str] = "impedance"
     GAINS: ClassVar[tuple[str, ...]] = ("k_pos", "k_rot")
     k_pos: tuple[float, float, float] = (1500.0, 1500.0, 1500.0)  # translational stiffness [N/m]
     k_rot: tuple[float, float, float] = (120.0, 120.0, 120.0)  # rotational stiffness [N m/rad]
     damping_ratio: float = 1.0  # zeta of D = 2 zeta sqrt(K m)
     v_max: float = 0.5  # caps |K_p e| at the force that drives the damped slide at v_max [m/s]
-    control_dt: float = 0.001  # [s]
 
     def __post_init__(self) -> None:
-        for name in ("k_pos", "k_rot"):
-            values = getattr(self, name)
-            if len(values) != 3 or not all(math.isfinite(v) and v > 0 for v in values):
-                raise ValueError(f"impedance.{name} must be 3 finite values > 0, got {values!r}")
-        for name in ("damping_ratio", "v_max", "control_dt"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"impedance.{name} must be finite and > 0, got {value!r}")
+        super().__post_init__()
+        for field in ("k_pos", "k_rot"):
+            if len(getattr(self, field)) != 3:
+                raise InvalidField(self.name, field, f"must hold 3 values, got {getattr(self, field)!r}")
+
+    def build(self, model: mujoco.MjModel) -> ImpedanceController:
+        return ImpedanceController(model, self)
 
 
-class ImpedanceController:
+class ImpedanceController(ControllerBase[ImpedanceConfig]):
+    """Task-space impedance with Pinocchio bias compensation. See the module docstring."""
+
     name = "impedance"
 
-    def __init__(self, model: mujoco.MjModel, config: ImpedanceConfig | None = None) -> None:
-        self.config = config or ImpedanceConfig()
-        self.control_dt = self.config.control_dt
-        self._act = ActuatorMap(model)
-        self._jaw = load_default()
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: ImpedanceConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
+        super().__init__(model, config or ImpedanceConfig(), jaw_calibration=jaw_calibration)
         self.dynamics = BaseDynamics()
         slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
         ball = model.joint(BALL_JOINT).dofadr[0]
@@ -71,14 +74,9 @@ class ImpedanceController:
         self._k = k
         self._d = 2.0 * self.config.damping_ratio * np.sqrt(k * apparent)
         self._cap = (self._b[0] + self._d[0]) * self.config.v_max
-        self._lim = np.concatenate([self._act.slide_limit, self._act.ball_limit])
         self._err = np.zeros(3)
 
-    def reset(self, state: ControlState) -> None:
-        pass
-
-    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
-        t0 = time.perf_counter()
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         e = np.empty(6)
         e[:3] = target.p_world - state.p_world
         mujoco.mju_subQuat(self._err, target.quat_world, state.quat_world)
@@ -95,12 +93,7 @@ class ImpedanceController:
         qd_ref = np.concatenate([target.v_world, target.omega_body])
         tau += self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
         tau += self._b * qd_ref
-        if not np.all(np.isfinite(tau)):
-            check_target(target)
-            raise ValueError(f"non-finite control from state at t={state.t}: {state}")
-        np.clip(tau, -self._lim, self._lim, out=tau)
-        ctrl = self._act.pack(tau[:3].tolist(), tau[3:].tolist(), self._jaw.sep_to_byte(target.jaw_sep_m))
-        return ControlOutput(ctrl, Diagnostics(solve_time_s=time.perf_counter() - t0))
+        return Effort(tau[:3].tolist(), tau[3:].tolist())
 
 
 def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -35,19 +35,30 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
-from controllers.dynamics import BaseDynamics
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.jaw import load_default
+from peg_ctrl.controllers.base import (
+    ControllerBase,
+    ControllerConfig,
+    Diagnostics,
+    Effort,
+    InvalidField,
+    check_multiple,
+    check_target,
+)
+from peg_ctrl.controllers.dynamics import BaseDynamics
+from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
-from peg_ctrl.sim import control_decimation
 from peg_ctrl.state import ControlState
 
 __all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
 
+_NAN3 = (math.nan, math.nan, math.nan)
 
-@dataclasses.dataclass(frozen=True)
-class MPCConfig:
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MPCConfig(ControllerConfig):
+    """Horizon, rate, weights and boxes of the MPC (``control_dt`` [s] from the base class)."""
+
     name: ClassVar[str] = "mpc"
     GAINS: ClassVar[tuple[str, ...]] = ("q_pos", "q_rot")
     horizon: int = 15  # steps
@@ -55,26 +66,23 @@ class MPCConfig:
     q_pos: float = 4.0e4  # weight on position error (translation) [1/m^2]
     q_vel: float = 10.0  # weight on velocity error [s^2/m^2]
     q_rot: float = 2.0e3  # weight on orientation error [1/rad^2]
-    q_omega: float = 1.0  # weight on angular velocity error
+    q_omega: float = 1.0  # weight on angular velocity error [s^2/rad^2]
     r_force: float = 1e-3  # weight on force effort [1/N^2]
     r_torque: float = 1e-3  # weight on torque effort [1/(N m)^2]
     v_max: float = 0.5  # velocity box [m/s]
     omega_max: float = 2.0  # angular velocity box [rad/s]
     solver: str = "qpoases"  # qpoases or osqp
-    control_dt: float = 0.001  # [s]
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.horizon, int) and self.horizon >= 2):
-            raise ValueError(f"mpc.horizon must be an integer >= 2, got {self.horizon!r}")
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, str) or f.name == "horizon":
-                continue
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"mpc.{f.name} must be finite and > 0, got {value!r}")
+        if not (isinstance(self.horizon, int) and not isinstance(self.horizon, bool) and self.horizon >= 2):
+            raise InvalidField(self.name, "horizon", f"must be an integer >= 2, got {self.horizon!r}")
+        super().__post_init__()
         if self.solver not in ("qpoases", "osqp"):
-            raise ValueError(f"mpc.solver must be one of 'qpoases', 'osqp', got {self.solver!r}")
-        control_decimation(self.mpc_dt, self.control_dt)
+            raise InvalidField(self.name, "solver", f"must be one of 'qpoases', 'osqp', got {self.solver!r}")
+        check_multiple(self, "mpc_dt")
+
+    def build(self, model: mujoco.MjModel) -> MPCController:
+        return MPCController(model, self)
 
 
 @contextlib.contextmanager
@@ -118,17 +126,27 @@ def lqr_gain(
     return k, p
 
 
-class MPCController:
+class MPCController(ControllerBase[MPCConfig]):
+    """Condensed linear MPC at ``mpc_dt``, zero-order hold between. See the module docstring.
+
+    Attributes:
+        last_solve: Diagnostics of the latest QP solve (solve time [s], status, iterations).
+    """
+
     name = "mpc"
 
-    def __init__(self, model: mujoco.MjModel, config: MPCConfig | None = None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: MPCConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
         import casadi as ca
 
-        self.config = c = config or MPCConfig()
-        self.control_dt = c.control_dt
-        self._every = control_decimation(c.mpc_dt, c.control_dt)
-        self._act = ActuatorMap(model)
-        self._jaw = load_default()
+        super().__init__(model, config or MPCConfig(), jaw_calibration=jaw_calibration)
+        c = self.config
+        self._every = check_multiple(c, "mpc_dt")
         self.dynamics = BaseDynamics()
         slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
         ball = model.joint(BALL_JOINT).dofadr[0]
@@ -208,7 +226,7 @@ class MPCController:
         self._warm_lam_x[:] = 0.0
         self._warm_lam_a[:] = 0.0
 
-    def reset(self, state: ControlState) -> None:
+    def _reset(self, state: ControlState) -> None:
         self._u[:] = 0.0
         self.reset_warm_start()
         self._count = 0
@@ -255,33 +273,29 @@ class MPCController:
         self._warm_lam_a = np.asarray(sol["lam_a"]).reshape(-1)
         return x[:6]
 
-    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
-        t0 = time.perf_counter()
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         v_ref = np.concatenate([target.v_world, target.omega_body])
         u_ff = self.damping * v_ref
-        diag = Diagnostics(0.0, "hold", 0)
+        status, iterations = "hold", 0
         if self._count % self._every == 0:
             check_target(target)
             z0 = self.error_state(state, target)
             if not np.all(np.isfinite(z0)):
-                raise ValueError(f"non-finite control from state at t={state.t}: {state}")
+                return Effort(_NAN3, _NAN3, "non_finite")  # the base class raises, naming the cause
+            t0 = time.perf_counter()
             try:
                 self._u = self.solve(z0, u_ff, v_ref)
                 stats = self._solver.stats()
                 status = "ok" if stats.get("success", True) else str(stats.get("return_status", "failed"))
-                diag = Diagnostics(time.perf_counter() - t0, status, int(stats.get("iter_count", 0) or 0))
+                iterations = int(stats.get("iter_count", 0) or 0)
             except RuntimeError as exc:
                 self._u = -self.k_lqr @ z0  # fall back to the LQR law, reported
-                diag = Diagnostics(time.perf_counter() - t0, f"qp_failed: {exc}".splitlines()[0], 0)
-            self.last_solve = diag
+                status = f"qp_failed: {exc}".splitlines()[0]
+            self.last_solve = Diagnostics(time.perf_counter() - t0, status, iterations)
         self._count += 1
         tau = (
             u_ff
             + self._u
             + self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
         )
-        np.clip(tau, -self.u_max, self.u_max, out=tau)
-        ctrl = self._act.pack(tau[:3].tolist(), tau[3:].tolist(), self._jaw.sep_to_byte(target.jaw_sep_m))
-        if diag.status == "hold":
-            diag = Diagnostics(time.perf_counter() - t0, "hold", 0)
-        return ControlOutput(ctrl, diag)
+        return Effort(tau[:3].tolist(), tau[3:].tolist(), status, iterations)

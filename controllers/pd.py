@@ -15,33 +15,33 @@ Ball joint (gripper frame, as MuJoCo's ball-joint velocities are)::
     tau     = sat( b_rot omega_d + K_w (omega_d - lowpass(omega)) + tau_gravity )
 
 ``Log(q^-1 q_d)`` is SPEC's ``Log(q_d q^-1)`` expressed in the body frame (``theta_body =
-R^T theta_world``), which is the frame the torques act in. Saturation is element-wise.
+R^T theta_world``), which is the frame the torques act in. Saturation (element-wise, to the
+actuator ranges) is done by :class:`~peg_ctrl.controllers.base.ControllerBase`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from typing import ClassVar
 
 import mujoco
 
-from controllers.base import ActuatorMap, ControlOutput, Diagnostics, check_target
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.jaw import JawCalibration, load_default
+from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
+from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
 from peg_ctrl.state import ControlState
 
 __all__ = ["PDConfig", "PDController"]
 
 
-@dataclasses.dataclass(frozen=True)
-class PDConfig:
-    """Gains and limits of the reference controller."""
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class PDConfig(ControllerConfig):
+    """Gains and limits of the reference controller (``control_dt`` [s] from the base class)."""
 
     name: ClassVar[str] = "pd"
-    GAINS: ClassVar[tuple[str, ...]] = ("kp_pos", "kd_pos", "k_rot", "k_omega")  # perturbed in sweeps
+    GAINS: ClassVar[tuple[str, ...]] = ("kp_pos", "kd_pos", "k_rot", "k_omega")
     kp_pos: float = 3000.0  # slide stiffness [N/m]
     kd_pos: float = 40.0  # slide damping on top of the joint damping [N s/m]
     v_max: float = 0.5  # soft cap on approach speed [m/s]
@@ -49,17 +49,13 @@ class PDConfig:
     k_omega: float = 20.0  # angular velocity loop gain [N m s/rad]
     omega_max: float = 1.5  # soft cap on commanded angular speed [rad/s]
     omega_filter_hz: float = 40.0  # first-order low-pass cut-off on measured omega [Hz]
-    control_dt: float = 0.001  # control period [s]
     model_feedforward: bool = True  # gravity and joint-damping feed-forward from the model
 
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, float) and not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"pd.{f.name} must be finite and > 0, got {value!r}")
+    def build(self, model: mujoco.MjModel) -> PDController:
+        return PDController(model, self)
 
 
-class PDController:
+class PDController(ControllerBase[PDConfig]):
     """Reference PD / angular-velocity controller. See module docstring for the control law."""
 
     name = "pd"
@@ -71,10 +67,7 @@ class PDController:
         *,
         jaw_calibration: JawCalibration | None = None,
     ) -> None:
-        self.config = config or PDConfig()
-        self.control_dt = self.config.control_dt
-        self._act = ActuatorMap(model)
-        self._jaw = jaw_calibration or load_default()
+        super().__init__(model, config or PDConfig(), jaw_calibration=jaw_calibration)
         slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
         ball_dof = model.joint(BALL_JOINT).dofadr[0]
         self._b_slide = model.dof_damping[slide_dofs].copy()
@@ -82,7 +75,8 @@ class PDController:
         root = model.body("gripper_root").id
         self._mass = float(model.body_subtreemass[root])
         self._gravity = model.opt.gravity.copy()
-        # Centre of mass of the gripper subtree in the gripper frame, at the home pose.
+        # Centre of mass of the gripper subtree in the gripper frame, at the home pose (on a
+        # scratch MjData: the controller never touches the simulation's).
         scratch = mujoco.MjData(model)
         key = model.key(HOME_KEY).id if model.nkey else -1
         if key >= 0:
@@ -98,19 +92,14 @@ class PDController:
         self._weight = tuple(float(g) * self._mass for g in self._gravity)  # m g, world [N]
         self._com_body = tuple(float(c) for c in self._com_body)
         self._slide_cap = (max(self._b_slide) + self.config.kd_pos) * self.config.v_max
-        self._slide_lim = tuple(float(v) for v in self._act.slide_limit)
-        self._ball_lim = tuple(float(v) for v in self._act.ball_limit)
         self._omega_f = [0.0, 0.0, 0.0]
-        self._jaw_cache = (math.nan, 0.0)
 
-    def reset(self, state: ControlState) -> None:
+    def _reset(self, state: ControlState) -> None:
         self._omega_f = [float(w) for w in state.omega_body]
-        self._jaw_cache = (math.nan, 0.0)
 
-    def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         # Scalar Python on purpose: at 1 kHz, numpy's per-call overhead on 3-vectors would cost
         # more than the physics step it controls (see `peg-sim bench`).
-        t0 = time.perf_counter()
         cfg = self.config
         ff = cfg.model_feedforward
         px, py, pz = state.p_world.tolist()
@@ -134,8 +123,6 @@ class PDController:
             fx += bx * tvx - gx
             fy += by * tvy - gy
             fz += bz * tvz - gz
-        lim = self._slide_lim
-        force = (_clip(fx, lim[0]), _clip(fy, lim[1]), _clip(fz, lim[2]))
 
         # Ball joint: theta = Log(q^-1 q_d), in the gripper frame.
         qw, qx, qy, qz = state.quat_world.tolist()
@@ -145,7 +132,7 @@ class PDController:
         ey = qw * dy + qx * dz - qy * dw - qz * dx
         ez = qw * dz - qx * dy + qy * dx - qz * dw
         sin_half = math.sqrt(ex * ex + ey * ey + ez * ez)
-        if sin_half > 1e-12:
+        if not sin_half <= 1e-12:  # written so that a NaN takes this branch and propagates
             angle = 2.0 * math.atan2(sin_half, ew)
             if angle > math.pi:  # short way round
                 angle -= 2.0 * math.pi
@@ -174,17 +161,7 @@ class PDController:
             tqx += bx * wx + gtx
             tqy += by * wy + gty
             tqz += bz * wz + gtz
-        lim = self._ball_lim
-        torque = (_clip(tqx, lim[0]), _clip(tqy, lim[1]), _clip(tqz, lim[2]))
-
-        jaw_sep = float(target.jaw_sep_m)
-        if jaw_sep != self._jaw_cache[0]:
-            self._jaw_cache = (jaw_sep, self._jaw.sep_to_byte(jaw_sep))
-        if not math.isfinite(sum(force) + sum(torque) + self._jaw_cache[1]):
-            check_target(target)  # names the bad entry
-            raise ValueError(f"non-finite control from state at t={state.t}: {state}")
-        ctrl = self._act.pack(force, torque, self._jaw_cache[1])
-        return ControlOutput(ctrl, Diagnostics(solve_time_s=time.perf_counter() - t0))
+        return Effort((fx, fy, fz), (tqx, tqy, tqz))
 
     def _gravity_torque(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
         """Body-frame torque that cancels the gripper's weight about the pivot [N m].
@@ -196,10 +173,6 @@ class PDController:
         bx, by, bz = _rotate(qw, -qx, -qy, -qz, gx, gy, gz)
         cx, cy, cz = self._com_body
         return (-(cy * bz - cz * by), -(cz * bx - cx * bz), -(cx * by - cy * bx))
-
-
-def _clip(value: float, limit: float) -> float:
-    return limit if value > limit else (-limit if value < -limit else value)
 
 
 def _rotate(

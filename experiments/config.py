@@ -25,16 +25,16 @@ from typing import Any
 
 from peg_ctrl.assets import AssetParams
 from peg_ctrl.config import ConfigError, load, read_mapping, to_dict
+from peg_ctrl.controllers.base import ControllerConfig
 from peg_ctrl.episode import (
-    ControllerSpec,
     DomainConfig,
     EpisodeConfig,
     RandomizationConfig,
     episode_config_from_mapping,
 )
+from peg_ctrl.planners import PLANNERS
 from peg_ctrl.scene import SceneConfig
-from peg_ctrl.task import SuccessConfig, TaskConfig
-from planners import PLANNERS
+from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig
 
 __all__ = ["ExperimentConfig", "Job", "load_experiment", "expand"]
 
@@ -42,7 +42,7 @@ __all__ = ["ExperimentConfig", "Job", "load_experiment", "expand"]
 @dataclasses.dataclass(frozen=True)
 class ExperimentConfig:
     name: str
-    controllers: tuple[ControllerSpec, ...]
+    controllers: tuple[ControllerConfig, ...]
     planners: tuple[str, ...] = ("ruckig",)
     clearances: tuple[float, ...] = (0.001,)  # radial hole clearance [m]
     seeds: tuple[int, ...] = tuple(range(20))
@@ -54,29 +54,29 @@ class ExperimentConfig:
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
-            raise ValueError(f"name must be a non-empty string without '/', got {self.name!r}")
+            raise ConfigError(f"name must be a non-empty string without '/', got {self.name!r}")
         if not self.controllers:
-            raise ValueError("controllers: at least one controller is needed")
+            raise ConfigError("controllers: at least one controller is needed")
         for i, p in enumerate(self.planners):
             if p not in PLANNERS:
-                raise ValueError(
+                raise ConfigError(
                     f"planners[{i}]: unknown planner {p!r}; known: {', '.join(sorted(PLANNERS))}"
                 )
         if not self.clearances:
-            raise ValueError("clearances: at least one clearance is needed")
+            raise ConfigError("clearances: at least one clearance is needed")
         for i, c in enumerate(self.clearances):
             if not c >= 0:
-                raise ValueError(f"clearances[{i}]: must be >= 0 m, got {c!r}")
+                raise ConfigError(f"clearances[{i}]: must be >= 0 m, got {c!r}")
             try:
                 AssetParams(clearance=c)
             except ValueError as exc:
-                raise ValueError(f"clearances[{i}]: {exc}") from None
+                raise ConfigError(f"clearances[{i}]: {exc}") from None
         if not self.seeds or any(s < 0 for s in self.seeds):
-            raise ValueError(f"seeds: need at least one seed, all >= 0, got {list(self.seeds)[:5]}")
+            raise ConfigError(f"seeds: need at least one seed, all >= 0, got {list(self.seeds)[:5]}")
         if len(set(self.seeds)) != len(self.seeds):
-            raise ValueError("seeds: repeated seeds")
+            raise ConfigError("seeds: repeated seeds")
         if self.max_steps < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+            raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,11 +92,18 @@ class Job:
     config: EpisodeConfig
 
 
-def _controller_label(spec: ControllerSpec, all_specs: tuple[ControllerSpec, ...]) -> str:
-    """The controller's name, with its parameters when the same name appears more than once."""
-    if sum(s.name == spec.name for s in all_specs) == 1 or not spec.params:
+def _changed_fields(spec: ControllerConfig) -> dict[str, Any]:
+    """The fields of ``spec`` that differ from its class's defaults."""
+    default = to_dict(type(spec)())
+    return {k: v for k, v in to_dict(spec).items() if default.get(k) != v}
+
+
+def _controller_label(spec: ControllerConfig, all_specs: tuple[ControllerConfig, ...]) -> str:
+    """The controller's name, with its changed fields when the same name appears more than once."""
+    changed = _changed_fields(spec)
+    if sum(s.name == spec.name for s in all_specs) == 1 or not changed:
         return spec.name
-    inner = ",".join(f"{k}={v}" for k, v in sorted(spec.params.items()))
+    inner = ",".join(f"{k}={v}" for k, v in sorted(changed.items()))
     return f"{spec.name}({inner})"
 
 
@@ -107,37 +114,19 @@ def load_experiment(path: Path) -> ExperimentConfig:
 
 
 def experiment_from_mapping(data: dict[str, Any], *, default_name: str = "experiment") -> ExperimentConfig:
+    """Validate plain data into an :class:`ExperimentConfig`; ``seeds: N`` means seeds 0..N-1."""
     data = dict(data)
     data.setdefault("name", default_name)
     if "controllers" not in data:
         raise ConfigError("controllers: missing field (a list like [{name: pd}, {name: mpc}])")
-    raw = data["controllers"]
-    if not isinstance(raw, list):
-        raise ConfigError(f"controllers: expected a list, got {raw!r}")
-    specs = []
-    for i, entry in enumerate(raw):
-        if isinstance(entry, str):
-            entry = {"name": entry}
-        if not isinstance(entry, dict) or "name" not in entry:
-            raise ConfigError(f"controllers[{i}]: expected {{name: ..., <params>}}, got {entry!r}")
-        params = {k: v for k, v in entry.items() if k != "name"}
-        try:
-            specs.append(
-                load(ControllerSpec, {"name": entry["name"], "params": params}, prefix=f"controllers[{i}].")
-            )
-        except ConfigError as exc:
-            message = str(exc)
-            if message.startswith("controller."):
-                message = f"controllers[{i}]." + message.removeprefix("controller.")
-            raise ConfigError(message) from None
-    data["controllers"] = []
+    if not isinstance(data["controllers"], list):
+        raise ConfigError(f"controllers: expected a list, got {data['controllers']!r}")
     seeds = data.get("seeds", 20)
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         if seeds < 1:
             raise ConfigError(f"seeds: must be >= 1, got {seeds}")
         data["seeds"] = list(range(seeds))
-    cfg = load(ExperimentConfig, {**data, "controllers": [{"name": "pd"}]})
-    return dataclasses.replace(cfg, controllers=tuple(specs))
+    return load(ExperimentConfig, data)
 
 
 def expand(exp: ExperimentConfig) -> list[Job]:
@@ -168,10 +157,7 @@ def expand(exp: ExperimentConfig) -> list[Job]:
 
 def job_config_mapping(job: Job) -> dict[str, Any]:
     """Plain data for a worker process (rebuilt there with full validation)."""
-    data = to_dict(job.config)
-    ctrl = data["controller"]
-    data["controller"] = {"name": ctrl["name"], **ctrl["params"]}
-    return data
+    return to_dict(job.config)
 
 
 def job_config(data: dict[str, Any]) -> EpisodeConfig:

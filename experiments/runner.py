@@ -17,6 +17,7 @@ those files in the experiment's fixed job order, so the number of workers does n
 from __future__ import annotations
 
 import concurrent.futures as futures
+import dataclasses
 import json
 import multiprocessing
 import time
@@ -24,8 +25,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
 from peg_ctrl.config import to_dict
+from peg_ctrl.errors import ConfigError, UnknownComponent
+from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
+from peg_ctrl.io import atomic_write_text
 
 __all__ = ["run_sweep", "collect_rows", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
 
@@ -65,9 +68,9 @@ def _run_one(args: tuple[str, dict[str, Any], str]) -> dict[str, Any]:
 def _warm_up(scene_data: dict[str, Any]) -> float:
     """Worker: import everything and compile the scene once; returns the time it took [s]."""
     t0 = time.perf_counter()
-    from peg_ctrl.episode import _compiled, episode_config_from_mapping
+    from peg_ctrl.episode import compiled_model, episode_config_from_mapping
 
-    _compiled(episode_config_from_mapping(scene_data).scene)
+    compiled_model(episode_config_from_mapping(scene_data).scene)
     return time.perf_counter() - t0
 
 
@@ -79,7 +82,7 @@ def bench_sweep(n_episodes: int = 6, *, workers: tuple[int, ...] = (1, 2)) -> di
     """
     import tempfile
 
-    from experiments.config import experiment_from_mapping
+    from peg_ctrl.experiments.config import experiment_from_mapping
 
     exp = experiment_from_mapping({"name": "bench", "controllers": ["pd"], "seeds": n_episodes})
     jobs = expand(exp)
@@ -164,16 +167,18 @@ def run_sweep(
     from tqdm import tqdm
 
     if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; known: {', '.join(sorted(BACKENDS))}")
+        raise UnknownComponent("backend", backend, BACKENDS)
     if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+        raise ConfigError(f"workers must be >= 1, got {workers}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     saved = out_dir / "experiment.json"
     resolved = json.dumps(to_dict(exp), indent=2, sort_keys=True) + "\n"
     if saved.is_file() and saved.read_text() != resolved:
-        raise ValueError(f"{out_dir} holds results of a different experiment; use another --out or delete it")
-    saved.write_text(resolved)
+        raise ConfigError(
+            f"{out_dir} holds results of a different experiment; use another --out or delete it"
+        )
+    atomic_write_text(saved, resolved)
     jobs = expand(exp)
     tasks = [
         (job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key))
@@ -182,18 +187,24 @@ def run_sweep(
     ]
     done_before = len(jobs) - len(tasks)
     started = time.perf_counter()
-    with tqdm(total=len(jobs), initial=done_before, desc=exp.name, unit="ep", disable=not progress) as bar:
-        successes = 0
-        runner = BACKENDS[backend]
-        stream = runner(tasks, workers, address) if backend == "ray" else runner(tasks, workers)
-        for result in stream:
-            successes += result["status"] == "success"
-            bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
-            bar.update(1)
-    rows = collect_rows(jobs, out_dir)
-    write_tables(rows, out_dir)
+    try:
+        with tqdm(
+            total=len(jobs), initial=done_before, desc=exp.name, unit="ep", disable=not progress
+        ) as bar:
+            successes = 0
+            runner = BACKENDS[backend]
+            stream = runner(tasks, workers, address) if backend == "ray" else runner(tasks, workers)
+            for result in stream:
+                successes += result["status"] == "success"
+                bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
+                bar.update(1)
+    finally:
+        # Whatever stopped the sweep (Ctrl-C, a crashed worker), the finished episodes' tables
+        # are written; the report only for a complete sweep.
+        rows = collect_rows(jobs, out_dir)
+        write_tables(rows, out_dir)
     if report:
-        from experiments.report import write_report
+        from peg_ctrl.experiments.report import write_report
 
         write_report(out_dir, elapsed_s=time.perf_counter() - started)
     return rows
@@ -201,7 +212,7 @@ def run_sweep(
 
 def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
     """One row per finished episode, in job order, from the episodes' ``summary.json``."""
-    from peg_ctrl.episode import _domain_draw
+    from peg_ctrl.episode import domain_draw
 
     rows = []
     for job in jobs:
@@ -209,7 +220,7 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
         if not _done(path.parent):
             continue
         s = json.loads(path.read_text())
-        draw = _domain_draw(job.config)
+        draw = dataclasses.asdict(domain_draw(job.config.seed, job.config.domain))
         rows.append(
             {
                 "key": job.key,
@@ -238,7 +249,7 @@ def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
     """``episodes.csv``, ``episodes.parquet`` and ``summary.csv``."""
     import csv
 
-    from experiments.report import summarise
+    from peg_ctrl.experiments.report import summarise
 
     with open(out_dir / "episodes.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=EPISODE_COLUMNS)

@@ -26,11 +26,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
+import shutil
 import struct
+import tempfile
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+from peg_ctrl.errors import OutputError
 
 __all__ = [
     "AssetParams",
@@ -40,11 +45,14 @@ __all__ = [
     "peg_mesh",
     "write_stl",
     "write_assets",
-    "default_assets_dir",
+    "reference_assets_dir",
+    "cache_dir",
     "ensure_assets",
 ]
 
 _STL_HEADER = b"peg_ctrl generated mesh".ljust(80, b"\0")
+# Bump when the generator's output changes for the same parameters, so old cached sets are not reused.
+_CACHE_FORMAT = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -317,30 +325,89 @@ def write_assets(params: AssetParams, directory: Path) -> dict[str, Path]:
     return files
 
 
-def default_assets_dir() -> Path:
-    """The committed default asset set (``assets/`` at the repository root or in the install)."""
+def reference_assets_dir() -> Path:
+    """The committed reference copy of the default set (``assets/default`` in a source checkout).
+
+    Only the tests read it, to check the generator byte for byte; an installed package does not
+    contain it, and the simulator never reads or writes it (see :func:`ensure_assets`).
+    """
     return Path(__file__).resolve().parent.parent / "assets" / "default"
 
 
-def _cache_dir() -> Path:
-    import os
-
+def cache_dir() -> Path:
+    """Where generated asset sets live: ``$PEG_CTRL_CACHE/assets``, else
+    ``$XDG_CACHE_HOME/peg_ctrl/assets``, else ``~/.cache/peg_ctrl/assets``."""
     base = os.environ.get("PEG_CTRL_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "peg_ctrl"
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "peg_ctrl"
     )
     return Path(base) / "assets"
 
 
-def ensure_assets(params: AssetParams) -> dict[str, Path]:
-    """Mesh files for ``params``: the committed set for the defaults, else generated into a cache.
+def _mesh_names(params: AssetParams) -> list[str]:
+    return ["peg", "block_visual", *(part_name(i) for i in range(params.n_parts))]
 
-    Files are regenerated whenever the stored ``params.json`` does not match ``params``.
-    """
-    directory = default_assets_dir() if params == AssetParams() else _cache_dir() / params.key()
-    expected = json.dumps(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
+
+def _params_json(params: AssetParams) -> str:
+    return json.dumps(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
+
+
+def _is_complete(directory: Path, params: AssetParams) -> bool:
     meta = directory / "params.json"
-    names = ["peg", "block_visual", *(part_name(i) for i in range(params.n_parts))]
-    files = {name: directory / f"{name}.stl" for name in names}
-    if meta.is_file() and meta.read_text() == expected and all(p.is_file() for p in files.values()):
+    try:
+        if meta.read_text() != _params_json(params):
+            return False
+    except (OSError, UnicodeDecodeError):
+        return False
+    return all((directory / f"{name}.stl").is_file() for name in _mesh_names(params))
+
+
+def ensure_assets(params: AssetParams) -> dict[str, Path]:
+    """Mesh files for ``params``, generated once into the user cache (:func:`cache_dir`).
+
+    A set lives in ``cache_dir()/v<format>-<params.key()>``. It is written into a temporary
+    directory beside it and renamed into place, so concurrent processes (sweep workers) never
+    see a partial set: the first rename wins and the others use the winner's identical files.
+    Nothing is ever written inside the installed package.
+
+    Raises:
+        OutputError: the cache directory cannot be created or written (set ``PEG_CTRL_CACHE``).
+    """
+    directory = cache_dir() / f"v{_CACHE_FORMAT}-{params.key()}"
+    files = {name: directory / f"{name}.stl" for name in _mesh_names(params)}
+    if _is_complete(directory, params):
         return files
-    return write_assets(params, directory)
+    try:
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", dir=directory.parent))
+        try:
+            write_assets(params, staging)
+            _publish(staging, directory, params)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    except OSError as exc:
+        raise OutputError(
+            f"cannot write the generated meshes to the cache {str(directory.parent)!r}: "
+            f"{exc.strerror or exc}; set PEG_CTRL_CACHE to a writable directory"
+        ) from None
+    return files
+
+
+def _publish(staging: Path, directory: Path, params: AssetParams) -> None:
+    """Rename ``staging`` to ``directory`` atomically unless a complete set is already there."""
+    for _ in range(3):
+        try:
+            os.rename(staging, directory)
+            return
+        except OSError:
+            # The target exists: another process won the race, or an old incomplete set is there.
+            if _is_complete(directory, params):
+                return
+        # Move the incomplete set aside (atomic), then retry; delete it afterwards.
+        trash = Path(tempfile.mkdtemp(prefix=f".{directory.name}.stale.", dir=directory.parent))
+        try:
+            os.rename(directory, trash / "set")
+        except FileNotFoundError:
+            pass
+        finally:
+            shutil.rmtree(trash, ignore_errors=True)
+    raise OSError(f"could not place {directory} (changed concurrently)")

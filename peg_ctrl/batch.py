@@ -37,10 +37,8 @@ def run_batch(
     """Run ``(EpisodeConfig, out_dir)`` jobs on ``workers`` processes; summaries in job order."""
     from tqdm import tqdm
 
+    # Configs travel as plain data and are validated again in the worker.
     items = [(to_dict(cfg), str(out), plot) for cfg, out in jobs]
-    for item in items:  # configs travel as plain data: the controller spec is re-validated
-        ctrl = item[0]["controller"]
-        item[0]["controller"] = {"name": ctrl["name"], **ctrl["params"]}
     workers = workers or default_workers()
     results: list[dict[str, Any] | None] = [None] * len(items)
     ctx = multiprocessing.get_context("spawn")

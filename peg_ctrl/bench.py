@@ -1,6 +1,7 @@
-"""Benchmarks: controller overhead over raw physics, measured as a ratio in one run.
+"""Benchmarks: the loop's overhead over raw physics, measured as a ratio in one run.
 
-Method (so that both sides do exactly the same physics): a closed-loop run records the control
+Method (so that both sides do exactly the same physics): a run of the one loop (a
+:class:`~peg_ctrl.tasks.tracking.TrackingTask`, or a whole episode) records the control
 sequence; the same sequence is then replayed with bare ``mj_step`` from the same initial state,
 which reproduces the trajectory bit for bit. Both are timed in alternating repetitions and the
 medians compared, so machine load affects both sides alike.
@@ -18,10 +19,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from controllers import make_controller
 from peg_ctrl.commands import GripperTarget, euler_to_quat
-from peg_ctrl.scene import build_model
-from peg_ctrl.sim import Simulation
+from peg_ctrl.controllers import make_controller
+from peg_ctrl.loop import Loop, StepInfo
+from peg_ctrl.scene import SceneConfig, build_model
+from peg_ctrl.tasks.tracking import TrackingTask
 
 __all__ = ["bench_controller", "run_benchmarks"]
 
@@ -51,6 +53,22 @@ def _targets(n_steps: int) -> list[GripperTarget]:
     return out
 
 
+class _ControlLog:
+    """Recorder: the controls and diagnostics of every step."""
+
+    def __init__(self) -> None:
+        self.ctrl: list[np.ndarray] = []
+        self.solve_times: list[float] = []
+        self.solver_calls: list[float] = []
+
+    def record(self, loop: Loop, info: StepInfo) -> None:
+        d = info.output.diagnostics
+        self.ctrl.append(np.asarray(info.output.ctrl))
+        self.solve_times.append(d.solve_time_s)
+        if d.status != "hold":  # a call that ran the controller's own solver
+            self.solver_calls.append(d.solve_time_s)
+
+
 def bench_controller(
     name: str, *, n_steps: int = 2000, repeats: int = 5, control_dt: float | None = None
 ) -> dict[str, Any]:
@@ -60,24 +78,25 @@ def bench_controller(
     """
     model = build_model()
     params = {} if control_dt is None else {"control_dt": control_dt}
-    sim = Simulation(model, make_controller(name, model, **params))
-    targets = _targets(n_steps // sim.decimation)
-    loop_times, raw_times, solve_times, solver_calls = [], [], [], []
-    qpos0 = None
-    ctrl_log: list[np.ndarray] = []
+    controller = make_controller(name, model, **params)
+    decimation = round(controller.control_dt / model.opt.timestep)
+    targets = _targets(n_steps // decimation)
+    log = _ControlLog()
+    closed = Loop(
+        model=model, controller=controller, task=TrackingTask(sequence=targets), scene=SceneConfig()
+    )
+    closed.recorders = [log]
+    loop_times, raw_times = [], []
     for rep in range(repeats):
-        sim.reset()
-        qpos0 = sim.data.qpos.copy()
-        ctrl_log = []
+        closed.reset(np.random.default_rng(0))
+        qpos0 = closed.data.qpos.copy()
+        log.ctrl = []
         t0 = time.thread_time()
-        for target in targets:
-            out = sim.control_step(target)
-            ctrl_log.append(np.asarray(out.ctrl))
-            solve_times.append(out.diagnostics.solve_time_s)
-            if out.diagnostics.status != "hold":  # a call that ran the controller's own solver
-                solver_calls.append(out.diagnostics.solve_time_s)
+        for _ in targets:
+            closed.step()
         loop_times.append(time.thread_time() - t0)
-        final_loop = sim.data.qpos.copy()
+        final_loop = closed.data.qpos.copy()
+        ctrl_log = log.ctrl
 
         data = mujoco.MjData(model)
         mujoco.mj_resetDataKeyframe(model, data, 0)
@@ -86,14 +105,15 @@ def bench_controller(
         t0 = time.thread_time()
         for ctrl in ctrl_log:
             data.ctrl[:] = ctrl
-            mujoco.mj_step(model, data, nstep=sim.decimation)
+            mujoco.mj_step(model, data, nstep=closed.decimation)
         raw_times.append(time.thread_time() - t0)
         if rep == 0 and not np.array_equal(final_loop, data.qpos):
             raise RuntimeError("replay diverged from the closed-loop run; benchmark is not comparable")
     loop = statistics.median(loop_times)
     raw = statistics.median(raw_times)
-    steps = len(targets) * sim.decimation
-    solve = np.asarray(solve_times)
+    steps = len(targets) * closed.decimation
+    solve = np.asarray(log.solve_times)
+    solver_calls = log.solver_calls
     return {
         "controller": name,
         "physics_steps": steps,
@@ -107,8 +127,8 @@ def bench_controller(
         # Calls that solved (diffik's IK, mpc's QP) rather than held the last solution.
         "solver_call_us_median": float(np.median(solver_calls) * 1e6) if solver_calls else None,
         "solver_call_us_p99": float(np.percentile(solver_calls, 99) * 1e6) if solver_calls else None,
-        "solver_period_us": _solver_period_us(sim.controller),
-        "control_period_us": sim.controller.control_dt * 1e6,
+        "solver_period_us": _solver_period_us(controller),
+        "control_period_us": controller.control_dt * 1e6,
     }
 
 
@@ -124,17 +144,12 @@ def bench_episode(
     import dataclasses
     import tempfile
 
-    from peg_ctrl.episode import (
-        ControllerSpec,
-        EpisodeConfig,
-        LogConfig,
-        RandomizationConfig,
-        initial_qpos,
-        run_episode,
-    )
+    from peg_ctrl.controllers import REGISTRY
+    from peg_ctrl.episode import EpisodeConfig, LogConfig, RandomizationConfig, run_episode
+    from peg_ctrl.tasks.pick_and_place import initial_qpos
 
     cfg = EpisodeConfig(
-        controller=ControllerSpec(controller),
+        controller=REGISTRY[controller](),
         planner=planner,
         seed=seed,
         randomization=RandomizationConfig(enabled=True),
@@ -160,7 +175,7 @@ def bench_episode(
         decimation[0] = steps // max(1, len(ctrls))
         data = mujoco.MjData(model)
         mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
-        data.qpos[:] = initial_qpos(model, cfg)
+        data.qpos[:] = initial_qpos(model, cfg.scene, cfg.randomization, np.random.default_rng(cfg.seed))
         mujoco.mj_forward(model, data)
         t0 = time.perf_counter()
         for ctrl in ctrls:

@@ -1,7 +1,19 @@
-"""``peg-sim``: the command-line entry point.
+"""``peg-sim``: the command-line entry point (also ``python -m peg_ctrl``).
 
-User mistakes end with a one-line ``peg-sim: error: ...`` on stderr and exit code 2, never a
-traceback.
+Exit codes, decided in one place (:func:`main`):
+
+- 0: done (an episode: inserted);
+- 1: an episode ran but failed (timeout, force spike, ...);
+- 2: the user's or the system's problem: a bad argument or config (every class in
+  :data:`peg_ctrl.errors.USER_ERRORS`, and any other :class:`~peg_ctrl.errors.PegCtrlError` that
+  is not a simulation error, such as no window system for teleop), or an :class:`OSError` (a
+  read-only or full disk, an unusable ``--out``). One line ``peg-sim: error: ...`` on stderr;
+- 130: interrupted with Ctrl-C.
+
+Any other exception is a bug and keeps its traceback.
+
+Every command that takes ``--out`` checks it (created, writable) after validating its arguments
+and before any work starts.
 """
 
 from __future__ import annotations
@@ -13,13 +25,40 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from peg_ctrl.errors import (
+    USER_ERRORS,
+    ConfigError,
+    DivergenceError,
+    PegCtrlError,
+    PlanningError,
+    UnknownComponent,
+)
+from peg_ctrl.io import atomic_write_text, prepare_output_dir, prepare_output_file
+
 __all__ = ["main"]
 
 _PENDING: dict[str, str] = {}
 
+EXIT_FAILED = 1
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
 
-class UsageError(Exception):
-    """A mistake in the user's input; reported in one line with exit code 2."""
+
+def _is_user_error(exc: BaseException) -> bool:
+    """The user's or the system's doing (exit 2, one line) rather than a bug (traceback)."""
+    if isinstance(exc, (*USER_ERRORS, OSError)):
+        return True
+    return isinstance(exc, PegCtrlError) and not isinstance(exc, (DivergenceError, PlanningError))
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and not isinstance(exc, PegCtrlError) and exc.strerror:
+        # "[Errno 28] No space left on device: 'x'" -> "'x': No space left on device"
+        where = f"{str(exc.filename)!r}: " if exc.filename is not None else ""
+        text = f"{where}{exc.strerror}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
 
 
 class _Parser(argparse.ArgumentParser):
@@ -32,7 +71,7 @@ class _Parser(argparse.ArgumentParser):
 def _cmd_model(args: argparse.Namespace) -> int:
     from peg_ctrl.scene import export_scene
 
-    path = export_scene(Path(args.out))
+    path = export_scene(prepare_output_dir(args.out))
     print(f"wrote {path} (open it with: python -m mujoco.viewer --mjcf={path})")
     return 0
 
@@ -42,11 +81,16 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from peg_ctrl.scene import build_model
 
     if args.samples < 4:
-        raise UsageError(f"--samples must be >= 4, got {args.samples}")
+        raise ConfigError(f"--samples must be >= 4, got {args.samples}")
+    target = args.out or jaw.source_tree_path()
+    if target is None:
+        raise ConfigError(
+            "--out is required: this is an installed copy, whose packaged calibration is read-only "
+            "(peg-sim calibrate --out jaw.json)"
+        )
+    out = prepare_output_file(target)
     cal = jaw.calibrate(build_model(), n_samples=args.samples, n_knots=max(2, args.samples // 2 + 1))
-    out = Path(args.out) if args.out else jaw.DEFAULT_PATH
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(cal.to_json() + "\n")
+    atomic_write_text(out, cal.to_json() + "\n")
     print(
         f"jaw calibration: {len(cal.bytes_)} knots, open {cal.sep_open_m * 1e3:.2f} mm, "
         f"closed {cal.sep_closed_m * 1e3:.2f} mm, max fit error {cal.fit_max_error_m * 1e3:.3f} mm "
@@ -55,35 +99,42 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_controller(name: str) -> None:
+    from peg_ctrl.controllers import REGISTRY
+
+    if name not in REGISTRY:
+        raise UnknownComponent("controller", name, REGISTRY)
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from controllers import REGISTRY
     from peg_ctrl.bench import run_benchmarks
+    from peg_ctrl.controllers import REGISTRY
 
     names = args.controller or sorted(REGISTRY)
-    unknown = [n for n in names if n not in REGISTRY]
-    if unknown:
-        raise UsageError(f"unknown controller {unknown[0]!r}; known: {', '.join(sorted(REGISTRY))}")
+    for name in names:
+        _check_controller(name)
     if args.steps < 100 or args.repeats < 1:
-        raise UsageError(f"--steps must be >= 100 and --repeats >= 1, got {args.steps}, {args.repeats}")
+        raise ConfigError(f"--steps must be >= 100 and --repeats >= 1, got {args.steps}, {args.repeats}")
     for dt in args.control_dt or []:
         if not dt > 0:
-            raise UsageError(f"--control-dt must be > 0 s, got {dt}")
+            raise ConfigError(f"--control-dt must be > 0 s, got {dt}")
+    if args.sweep and args.sweep_episodes < 1:
+        raise ConfigError(f"--sweep-episodes must be >= 1, got {args.sweep_episodes}")
+    out = prepare_output_file(args.out)
     if args.sweep:
         import json
 
-        from experiments.runner import bench_sweep
+        from peg_ctrl.experiments.runner import bench_sweep
 
         result = bench_sweep(args.sweep_episodes)
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(result, indent=2) + "\n")
+        atomic_write_text(out, json.dumps(result, indent=2) + "\n")
         print(
             f"sweep of {result['episodes']} episodes: 1 worker {result['wall_s']['1']:.1f} s, "
             f"2 workers {result['wall_s']['2']:.1f} s, speedup {result['speedup_2_vs_1']:.2f}x; wrote {out}"
         )
         return 0
     results = run_benchmarks(
-        Path(args.out),
+        out,
         controllers=names,
         n_steps=args.steps,
         repeats=args.repeats,
@@ -103,7 +154,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             f"{e['episode_step_us_median']:.1f} us/step, overhead {100 * e['overhead_ratio']:+.1f} % "
             f"(logging {100 * e['logging_share_of_overhead']:.0f} % of it)"
         )
-    print(f"wrote {args.out}")
+    print(f"wrote {out}")
     return 0
 
 
@@ -128,14 +179,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.max_steps is not None:
         data["max_steps"] = args.max_steps
     cfg = episode_config_from_mapping(data)
-    out = Path(args.out)
+    out = prepare_output_dir(args.out)
     if args.viewer:
         result = _run_with_viewer(cfg, out)
     else:
         result = run_episode(cfg, out, video=args.video)
     print(result.one_line())
     print(f"wrote {out / 'summary.json'}")
-    return 0 if result.status == "success" else 1
+    return 0 if result.status == "success" else EXIT_FAILED
 
 
 def _run_with_viewer(cfg, out: Path):  # type: ignore[no-untyped-def]
@@ -168,39 +219,19 @@ def _run_with_viewer(cfg, out: Path):  # type: ignore[no-untyped-def]
             viewer.close()  # type: ignore[attr-defined]
 
 
-SCRIPTED_INSERTION = (
-    ("z", 0.020),
-    ("jaw", 0.0),
-    ("wait", 0.8),
-    ("z", 0.15),
-    ("roll", 1.5707963267948966),
-    ("wait", 0.5),
-    ("align", None),
-    ("wait", 0.5),
-    ("align", None),
-    ("z", 0.09),
-    ("jaw", 0.085),
-    ("wait", 2.0),
-)
-
-
 def _cmd_teleop(args: argparse.Namespace) -> int:
-    from peg_ctrl.teleop import SPEED_RANGE, ScriptedOperator, TeleopSession
+    from peg_ctrl.teleop import SCRIPTED_INSERTION, SPEED_RANGE, ScriptedOperator, TeleopSession
 
     lo, hi = SPEED_RANGE
     if not lo <= args.speed <= hi:
-        raise UsageError(f"--speed must be in [{lo}, {hi}], got {args.speed}")
+        raise ConfigError(f"--speed must be in [{lo}, {hi}], got {args.speed}")
     if args.seed < 0:
-        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+        raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if not args.scripted and not os.environ.get("DISPLAY"):
-        raise UsageError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
-    from controllers import REGISTRY
-
-    if args.controller not in REGISTRY:
-        raise UsageError(f"unknown controller {args.controller!r}; known: {', '.join(sorted(REGISTRY))}")
-    session = TeleopSession(
-        Path(args.out), controller=args.controller, seed=args.seed, randomize=args.randomize
-    )
+        raise ConfigError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
+    _check_controller(args.controller)
+    out = prepare_output_dir(args.out)
+    session = TeleopSession(out, controller=args.controller, seed=args.seed, randomize=args.randomize)
     session.mapper.set_speed(args.speed)
     if args.scripted:
         ScriptedOperator(session, SCRIPTED_INSERTION).run(max_sim_s=120.0)
@@ -210,27 +241,71 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
 
         try:
             summary = run_window(session, screenshot=Path(args.screenshot) if args.screenshot else None)
-        except WindowUnavailable as exc:
+        except WindowUnavailable:
             session.finish("no_window")
-            raise UsageError(str(exc)) from None
+            raise
     inserted = "inserted" if summary["status"] == "success" else "not inserted"
     print(
         f"teleop ended ({summary['end']}): {inserted}, {summary['total_timesteps']} steps, "
-        f"{summary['attempts']} attempt(s); wrote {Path(args.out) / 'summary.json'}"
+        f"{summary['attempts']} attempt(s); wrote {out / 'summary.json'}"
     )
     return 0
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
-    from experiments.config import load_experiment
-    from experiments.runner import run_sweep
-    from peg_ctrl.batch import default_workers
+def shipped_experiments() -> dict[str, Path]:
+    """The experiment files installed with the package (``peg_ctrl/experiments/configs``), by name."""
+    from importlib import resources
 
-    exp = load_experiment(Path(args.config))
+    root = resources.files("peg_ctrl.experiments") / "configs"
+    found = {}
+    for entry in root.iterdir():
+        if entry.name.endswith((".yaml", ".yml", ".toml", ".json")) and entry.is_file():
+            found[entry.name.rsplit(".", 1)[0]] = Path(str(entry))
+    return dict(sorted(found.items()))
+
+
+def _description(path: Path) -> str:
+    """An experiment file's leading comment block, joined into one line."""
+    lines = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.lstrip("#").strip())
+    return " ".join(part for part in lines if part) or "(no description)"
+
+
+def _resolve_experiment(config: str) -> Path:
+    """A path to an experiment file, or the name of a shipped one (``quick``)."""
+    path = Path(config)
+    if path.exists():
+        return path
+    shipped = shipped_experiments()
+    if config in shipped:
+        return shipped[config]
+    raise ConfigError(
+        f"experiment file {config!r} does not exist, and no shipped experiment has that name; "
+        f"shipped: {', '.join(shipped) or '(none)'} (see peg-sim sweep --list)"
+    )
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    if args.list:
+        shipped = shipped_experiments()
+        width = max((len(name) for name in shipped), default=0)
+        for name, path in shipped.items():
+            print(f"{name:<{width}}  {_description(path)}")
+        return 0
+
+    path = _resolve_experiment(args.config)
+    from peg_ctrl.batch import default_workers
+    from peg_ctrl.experiments.config import load_experiment
+    from peg_ctrl.experiments.runner import run_sweep
+
+    exp = load_experiment(path)
     workers = args.workers or default_workers()
     if workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {workers}")
-    out = Path(args.out) if args.out else Path("runs") / exp.name
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
+    out = prepare_output_dir(args.out if args.out else Path("runs") / exp.name)
     rows = run_sweep(exp, out, workers=workers, backend=args.backend, address=args.address)
     wins = sum(r["status"] == "success" for r in rows)
     print(f"{exp.name}: {wins}/{len(rows)} episodes inserted; wrote {out / 'report.md'}")
@@ -238,18 +313,18 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from experiments.report import write_report
+    from peg_ctrl.experiments.report import write_report
 
     out = Path(args.dir)
     if not (out / "episodes.csv").is_file():
-        raise UsageError(f"{out} has no episodes.csv (run peg-sim sweep first)")
+        raise ConfigError(f"{out} has no episodes.csv (run peg-sim sweep first)")
     print(f"wrote {write_report(out)}")
     return 0
 
 
 def _pending(name: str) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
-        raise UsageError(f"'{name}' is not available in this version yet")
+        raise ConfigError(f"'{name}' is not available in this version yet")
 
     return run
 
@@ -268,7 +343,9 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("bench", help="controller overhead over raw physics, written to JSON")
-    p.add_argument("--out", default="bench.json", help="output JSON (default bench.json)")
+    p.add_argument(
+        "--out", default="bench.json", help="output JSON file (default: bench.json in the current directory)"
+    )
     p.add_argument("--controller", action="append", help="controller to bench (repeatable; default all)")
     p.add_argument("--steps", type=int, default=3000, help="physics steps per repetition")
     p.add_argument("--repeats", type=int, default=7, help="alternating repetitions (median taken)")
@@ -322,9 +399,13 @@ def _parser() -> argparse.ArgumentParser:
         description="Run or resume an experiment; writes DIR/episodes.csv, .parquet, summary.csv, "
         "report.md and plots. Rerunning the same command skips finished episodes.",
     )
-    p.add_argument(
-        "config", help="experiment file (.yaml, .toml or .json), e.g. experiments/configs/quick.yaml"
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument(
+        "config",
+        nargs="?",
+        help="experiment file (.yaml, .toml or .json), or the name of a shipped one (e.g. quick)",
     )
+    what.add_argument("--list", action="store_true", help="list the shipped experiments and exit")
     p.add_argument("--out", help="output directory (default runs/<experiment name>)")
     p.add_argument("--workers", type=int, help="worker processes (default: one per core)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
@@ -349,12 +430,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         return int(args.func(args))
-    except (UsageError, ValueError, FileNotFoundError, RuntimeError) as exc:
-        print(f"peg-sim: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("peg-sim: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # The reader of our output went away (`peg-sim sweep --list | head`): not an error.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
+    except Exception as exc:
+        if not _is_user_error(exc):
+            raise  # a bug: keep the traceback
+        print(f"peg-sim: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":

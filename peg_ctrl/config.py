@@ -3,6 +3,11 @@
 ``load(cls, mapping)`` builds a dataclass from plain data: unknown fields, wrong types and
 values a dataclass's own ``__post_init__`` rejects all raise :class:`ConfigError` naming the
 field by its dotted path (``task.lift_height``).
+
+A *selectable* config family (the controllers) is a base dataclass with a ``select(data,
+prefix=...)`` classmethod: a field typed with the base class takes a mapping with a ``name``
+key (``{name: impedance, k_pos: [1200, 1200, 1200]}``) or a bare name, and the family picks
+the concrete class. :func:`to_dict` writes the ``name`` back, so saved configs load again.
 """
 
 from __future__ import annotations
@@ -15,13 +20,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar, Union
 
-__all__ = ["ConfigError", "load", "load_file", "read_mapping", "to_dict"]
+from peg_ctrl.errors import ConfigError
+
+__all__ = ["ConfigError", "load", "load_file", "read_mapping", "to_dict", "is_selectable"]
 
 T = TypeVar("T")
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown or invalid; the message names the field."""
 
 
 def read_mapping(path: Path) -> dict[str, Any]:
@@ -30,31 +33,32 @@ def read_mapping(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     suffix = path.suffix.lower()
-    text = path.read_text()
-    try:
-        if suffix in (".yaml", ".yml"):
-            import yaml
+    if suffix not in (".yaml", ".yml", ".toml", ".json"):
+        raise ConfigError(
+            f"config file {str(path)!r}: unsupported suffix {suffix!r}; use .yaml, .toml or .json"
+        )
+    import yaml
 
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+
+    try:
+        text = path.read_text(encoding="utf-8")
+        if suffix in (".yaml", ".yml"):
             data = yaml.safe_load(text)
         elif suffix == ".toml":
-            try:
-                import tomllib
-            except ImportError:  # Python 3.10
-                import tomli as tomllib  # type: ignore[no-redef]
-
             data = tomllib.loads(text)
-        elif suffix == ".json":
-            data = json.loads(text)
         else:
-            raise ConfigError(
-                f"config file {str(path)!r}: unsupported suffix {suffix!r}; use .yaml, .toml or .json"
-            )
-    except ConfigError:
-        raise
-    except Exception as exc:  # parser errors carry line numbers; keep them, in one line
+            data = json.loads(text)
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        # Parser errors carry line numbers; keep them, in one line.
         raise ConfigError(
             f"config file {str(path)!r} is not valid {suffix[1:].upper()}: {exc}".replace("\n", " ")
         ) from None
+    except OSError as exc:
+        raise ConfigError(f"config file {str(path)!r} cannot be read: {exc.strerror}") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -102,6 +106,8 @@ def _convert(hint: Any, value: Any, path: str) -> Any:
             except ConfigError as exc:
                 errors.append(str(exc))
         raise ConfigError(errors[0] if errors else f"{path}: invalid value {value!r}")
+    if is_selectable(hint):
+        return hint.select(value, prefix=f"{path}.")
     if dataclasses.is_dataclass(hint):
         return load(hint, value, prefix=f"{path}.")  # type: ignore[arg-type]
     if hint is Any:
@@ -141,10 +147,18 @@ def _convert(hint: Any, value: Any, path: str) -> Any:
     return value
 
 
+def is_selectable(hint: Any) -> bool:
+    """Whether ``hint`` is the base of a config family chosen by a ``name`` key."""
+    return (
+        isinstance(hint, type) and dataclasses.is_dataclass(hint) and callable(getattr(hint, "select", None))
+    )
+
+
 def to_dict(cfg: Any) -> Any:
     """Plain data (dicts, lists, numbers, strings) for a dataclass config, for saving as JSON/YAML."""
     if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
-        return {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg) if f.init}
+        fields = {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg) if f.init}
+        return {"name": cfg.name, **fields} if is_selectable(type(cfg)) else fields
     if isinstance(cfg, (list, tuple)):
         return [to_dict(v) for v in cfg]
     if isinstance(cfg, dict):

@@ -1,24 +1,13 @@
-"""One autonomous episode: the loop that owns time.
+"""One autonomous episode: its configuration, and the driver that runs it through the loop.
 
-Physics steps at the model timestep (1 ms); the controller runs every ``decimation`` steps (its
-period must be a whole multiple of the timestep); the state machine and the planner are sampled
-at the control rate; success and failure are checked and the force trace recorded every control
-step; the SPEC §7 step record is logged every ``log.interval`` physics steps.
+The driver compiles the scene (cached per process), applies the per-seed domain draw, builds the
+controller, the pick-and-place task, the monitors and the recorders, runs :class:`~peg_ctrl.loop.Loop`
+and writes ``summary.json``, ``config.json``, ``log.jsonl``, ``forces.npz`` (and the force plot
+and video) into the output directory. Success and failure are the task's and the monitors'
+(see :mod:`peg_ctrl.tasks.pick_and_place` and :mod:`peg_ctrl.monitors`).
 
-Success
-    Peg depth ≥ ``success.min_depth``, lateral error at the mouth ≤ ``success.max_lateral_error``
-    and tilt ≤ ``success.max_tilt``, after release, for ``success.consecutive_steps`` control
-    steps in a row.
-
-Failures (``reason``)
-    ``timeout`` (step limit, or the peg never went in before the settle timeout),
-    ``force_spike`` (any contact force above ``success.force_spike``), ``excessive_tilt`` (the
-    peg turned in the pads, or lies tilted at the end), ``grasp_lost`` (closed on nothing or
-    dropped), ``diverged`` (non-finite state or a MuJoCo warning).
-
-Randomizations
-    With ``randomization.enabled``: peg start position ± ``peg_xy`` [m] in x and y, and its yaw
-    ± ``peg_yaw`` [rad], drawn from ``numpy.random.default_rng(seed)``. The hole is fixed.
+Random streams, all from ``seed``: the task's start pose ``default_rng(seed)``, the domain draw
+``default_rng([seed, 1])``, sensor noise ``default_rng([seed, 2])``.
 """
 
 from __future__ import annotations
@@ -26,6 +15,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+import json
 import math
 import time
 from collections.abc import Callable
@@ -35,27 +25,21 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from controllers import REGISTRY, make_controller
-from peg_ctrl.commands import quat_to_euler
-from peg_ctrl.config import load, to_dict
+from peg_ctrl.config import ConfigError, load, to_dict
+from peg_ctrl.controllers import PDConfig
+from peg_ctrl.controllers.base import ControllerConfig
 from peg_ctrl.episode_log import EpisodeLogger
+from peg_ctrl.errors import FAILURE_REASONS
+from peg_ctrl.io import atomic_write_text
 from peg_ctrl.jaw import load_default
-from peg_ctrl.scene import GRIPPER_PREFIX, PEG_LYING_QUAT, SceneConfig, build_model
-from peg_ctrl.sim import control_decimation
-from peg_ctrl.state import PAIRS, StateReader
-from peg_ctrl.task import (
-    PHASE_ORDER,
-    GraspLost,
-    InsertionStateMachine,
-    PegObservation,
-    Phase,
-    SuccessConfig,
-    TaskConfig,
-)
-from planners import PLANNERS, MotionLimits, make_planner
+from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
+from peg_ctrl.monitors import ContactMonitor, GraspMonitor
+from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
+from peg_ctrl.recorders import CallbackRecorder, StepLogRecorder, TraceRecorder, VideoRecorder
+from peg_ctrl.scene import SceneConfig, build_model
+from peg_ctrl.tasks.pick_and_place import PickAndPlaceTask, RandomizationConfig, SuccessConfig, TaskConfig
 
 __all__ = [
-    "ControllerSpec",
     "RandomizationConfig",
     "LogConfig",
     "EpisodeConfig",
@@ -64,44 +48,12 @@ __all__ = [
     "episode_config_from_mapping",
     "FAILURE_REASONS",
     "DomainConfig",
+    "DomainDraw",
+    "domain_draw",
+    "compiled_model",
     "prepare_model",
+    "build_loop",
 ]
-
-FAILURE_REASONS = ("timeout", "force_spike", "excessive_tilt", "grasp_lost", "diverged")
-_BLOCK_PEG = PAIRS.index(("block", "peg"))
-
-
-@dataclasses.dataclass(frozen=True)
-class ControllerSpec:
-    """A registered controller name and its config fields (see ``controllers.REGISTRY``)."""
-
-    name: str = "pd"
-    params: dict[str, Any] = dataclasses.field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.name not in REGISTRY:
-            raise ValueError(f"unknown controller {self.name!r}; known: {', '.join(sorted(REGISTRY))}")
-        config_cls = REGISTRY[self.name][0]
-        known = {f.name for f in dataclasses.fields(config_cls)}
-        for key in self.params:
-            if key not in known:
-                raise ValueError(
-                    f"{key}: unknown field of controller {self.name!r}; known: {', '.join(sorted(known))}"
-                )
-        load(config_cls, self.params, prefix="controller.")  # type and range checks, named
-
-
-@dataclasses.dataclass(frozen=True)
-class RandomizationConfig:
-    enabled: bool = False
-    peg_xy: float = 0.015  # +- range of the peg's start x and y [m]
-    peg_yaw: float = 0.2  # +- range of the peg's start yaw [rad]
-
-    def __post_init__(self) -> None:
-        for name in ("peg_xy", "peg_yaw"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"randomization.{name} must be finite and >= 0, got {value!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,11 +71,11 @@ class DomainConfig:
         for name in ("peg_mass_scale", "friction_scale", "gain_scale"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-                raise ValueError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
+                raise ConfigError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
         for name in ("position_noise", "velocity_noise", "force_noise"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"domain.{name} must be finite and >= 0, got {value!r}")
+                raise ConfigError(f"domain.{name} must be finite and >= 0, got {value!r}")
 
     @property
     def noisy(self) -> bool:
@@ -138,16 +90,16 @@ class LogConfig:
 
     def __post_init__(self) -> None:
         if self.interval < 1:
-            raise ValueError(f"log.interval must be >= 1, got {self.interval}")
+            raise ConfigError(f"log.interval must be >= 1, got {self.interval}")
         if not self.contact_threshold >= 0:
-            raise ValueError(f"log.contact_threshold must be >= 0, got {self.contact_threshold}")
+            raise ConfigError(f"log.contact_threshold must be >= 0, got {self.contact_threshold}")
 
 
 @dataclasses.dataclass(frozen=True)
 class EpisodeConfig:
     """Everything one autonomous episode depends on."""
 
-    controller: ControllerSpec = ControllerSpec()
+    controller: ControllerConfig = PDConfig()
     planner: str = "ruckig"
     seed: int = 0
     max_steps: int = 20_000  # physics steps (SPEC: 20,000)
@@ -161,23 +113,15 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         if self.planner not in PLANNERS:
-            raise ValueError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
+            raise ConfigError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
         if self.max_steps < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+            raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
+            raise ConfigError(f"seed must be >= 0, got {self.seed}")
 
 
 def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
     """Build an :class:`EpisodeConfig` from plain data; ``controller: {name: pd, kp_pos: ...}``."""
-    data = dict(data)
-    ctrl = data.get("controller")
-    if isinstance(ctrl, str):
-        data["controller"] = {"name": ctrl, "params": {}}
-    elif isinstance(ctrl, dict) and "params" not in ctrl:
-        ctrl = dict(ctrl)
-        name = ctrl.pop("name", "pd")
-        data["controller"] = {"name": name, "params": ctrl}
     return load(EpisodeConfig, data)
 
 
@@ -215,11 +159,10 @@ class EpisodeResult:
         return dataclasses.asdict(self)
 
     def one_line(self) -> str:
-        head = (
-            "SUCCESS"
-            if self.status == "success"
-            else f"{self.status.upper()} ({self.reason} in {self.phase})"
-        )
+        if self.status == "success":
+            head = "SUCCESS"
+        else:
+            head = f"{self.status.upper()} ({self.reason} in {self.phase})"
         tti = f", inserted at {self.time_to_insert_s:.2f} s" if self.time_to_insert_s is not None else ""
         return (
             f"{head}: {self.controller}+{self.planner} seed {self.seed}, {self.total_timesteps} steps "
@@ -230,80 +173,74 @@ class EpisodeResult:
 
 
 @functools.lru_cache(maxsize=8)
-def _compiled(scene: SceneConfig) -> mujoco.MjModel:
+def compiled_model(scene: SceneConfig) -> mujoco.MjModel:
     """One compiled model per scene per process (sweep workers reuse it across episodes)."""
     return build_model(scene)
 
 
-def _domain_draw(cfg: EpisodeConfig) -> dict[str, float]:
+@dataclasses.dataclass(frozen=True)
+class DomainDraw:
+    """One seed's domain factors."""
+
+    peg_mass_scale: float
+    friction_scale: float
+    gain_scale: float
+
+
+def domain_draw(seed: int, domain: DomainConfig) -> DomainDraw:
     """The per-seed domain factors (a random stream separate from the start pose's)."""
-    d = cfg.domain
-    rng = np.random.default_rng([cfg.seed, 1])
-    return {
-        "peg_mass_scale": float(rng.uniform(*d.peg_mass_scale)),
-        "friction_scale": float(rng.uniform(*d.friction_scale)),
-        "gain_scale": float(rng.uniform(*d.gain_scale)),
-    }
+    rng = np.random.default_rng([seed, 1])
+    return DomainDraw(
+        peg_mass_scale=float(rng.uniform(*domain.peg_mass_scale)),
+        friction_scale=float(rng.uniform(*domain.friction_scale)),
+        gain_scale=float(rng.uniform(*domain.gain_scale)),
+    )
 
 
-def prepare_model(cfg: EpisodeConfig) -> tuple[mujoco.MjModel, dict[str, float]]:
-    """A private copy of the scene's model with the domain randomization applied."""
-    model = copy.copy(_compiled(cfg.scene))
-    draw = _domain_draw(cfg)
+def prepare_model(cfg: EpisodeConfig, draw: DomainDraw) -> mujoco.MjModel:
+    """A private copy of the scene's model with the domain draw applied."""
+    model = copy.copy(compiled_model(cfg.scene))
     peg = model.body("peg").id
-    model.body_mass[peg] *= draw["peg_mass_scale"]
-    model.body_inertia[peg] *= draw["peg_mass_scale"]
+    model.body_mass[peg] *= draw.peg_mass_scale
+    model.body_inertia[peg] *= draw.peg_mass_scale
     for g in range(model.ngeom):
         if model.geom_bodyid[g] in (peg, model.body("block").id):
-            model.geom_friction[g, 0] *= draw["friction_scale"]
+            model.geom_friction[g, 0] *= draw.friction_scale
     mujoco.mj_setConst(model, mujoco.MjData(model))
-    return model, draw
+    return model
 
 
-def controller_params(cfg: EpisodeConfig, gain_scale: float) -> dict[str, Any]:
-    """The controller's parameters with every gain in its config's ``GAINS`` scaled."""
-    config_cls = REGISTRY[cfg.controller.name][0]
-    params = dict(cfg.controller.params)
-    if gain_scale != 1.0:
-        defaults = config_cls()
-        for name in getattr(config_cls, "GAINS", ()):
-            value = params.get(name, getattr(defaults, name))
-            if isinstance(value, tuple):
-                params[name] = tuple(v * gain_scale for v in value)
-            else:
-                params[name] = value * gain_scale
-    return params
-
-
-def initial_qpos(model: mujoco.MjModel, cfg: EpisodeConfig) -> np.ndarray:
-    """Home keyframe with the peg's start pose randomised from ``cfg.seed`` if enabled."""
-    qpos = model.key("home").qpos.copy()
-    rz = cfg.randomization
-    adr = model.joint("peg_free").qposadr[0]
-    x, y = cfg.scene.peg_xy
-    yaw = 0.0
-    if rz.enabled:
-        rng = np.random.default_rng(cfg.seed)
-        dx, dy = rng.uniform(-rz.peg_xy, rz.peg_xy, size=2)
-        yaw = float(rng.uniform(-rz.peg_yaw, rz.peg_yaw))
-        x, y = x + dx, y + dy
-    q_yaw = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
-    q = np.empty(4)
-    mujoco.mju_mulQuat(q, q_yaw, np.asarray(PEG_LYING_QUAT))
-    qpos[adr : adr + 3] = [x, y, cfg.scene.assets.peg_radius]
-    qpos[adr + 3 : adr + 7] = q
-    return qpos
-
-
-class _Failure(Exception):
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(detail)
-        self.reason = reason
-        self.detail = detail
-
-
-def _round(values: Any, digits: int = 6) -> list[float]:
-    return [round(float(v), digits) for v in values]
+def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> Loop:
+    """The loop of one episode: model with the domain draw, scaled controller, task, monitors."""
+    draw = domain_draw(cfg.seed, cfg.domain)
+    model = prepare_model(cfg, draw)
+    task = PickAndPlaceTask(
+        scene=cfg.scene,
+        config=cfg.task,
+        success=cfg.success,
+        randomization=cfg.randomization,
+        planner=make_planner(cfg.planner),
+        limits=cfg.limits,
+        jaw=load_default(),
+    )
+    d, s = cfg.domain, cfg.success
+    noise = None
+    if d.noisy:
+        rng = np.random.default_rng([cfg.seed, 2])
+        noise = SensorNoise(
+            position=d.position_noise, velocity=d.velocity_noise, force=d.force_noise, rng=rng
+        )
+    return Loop(
+        model=model,
+        controller=cfg.controller.scaled(draw.gain_scale).build(model),
+        task=task,
+        scene=cfg.scene,
+        contact=ContactMonitor(force_spike=s.force_spike),
+        grasp=GraspMonitor(model, lost_distance=s.grasp_lost_distance, max_in_hand_tilt=s.max_in_hand_tilt),
+        noise=noise,
+        recorders=recorders or [],
+        contact_threshold_n=cfg.log.contact_threshold,
+    )
 
 
 def run_episode(
@@ -316,293 +253,77 @@ def run_episode(
 ) -> EpisodeResult:
     """Run one episode headless, writing ``summary.json``, ``config.json``, logs, plot (and video).
 
-    ``on_step`` (e.g. a viewer sync) is called after every control step.
+    ``on_step`` (e.g. a viewer sync) is called after every control step. Ctrl-C writes the
+    results so far (status ``interrupted``) and re-raises :class:`KeyboardInterrupt`.
     """
-    import json
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "config.json").write_text(json.dumps(to_dict(cfg), indent=2) + "\n")
-    model, draw = prepare_model(cfg)
-    data = mujoco.MjData(model)
-    controller = make_controller(cfg.controller.name, model, **controller_params(cfg, draw["gain_scale"]))
-    noise_rng = np.random.default_rng([cfg.seed, 2]) if cfg.domain.noisy else None
-    decimation = control_decimation(controller.control_dt, model.opt.timestep)
-    reader = StateReader(model, contact_threshold_n=cfg.log.contact_threshold)
-    fsm = InsertionStateMachine(
-        scene=cfg.scene,
-        task=cfg.task,
-        planner=make_planner(cfg.planner),
-        limits=cfg.limits,
-        jaw=load_default(),
-    )
-    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
-    data.qpos[:] = initial_qpos(model, cfg)
-    mujoco.mj_forward(model, data)
-
+    atomic_write_text(out_dir / "config.json", json.dumps(to_dict(cfg), indent=2) + "\n")
     logger = EpisodeLogger(out_dir)
-    recorder = _VideoRecorder(model, out_dir / "episode.mp4") if video else None
-    peg_adr = model.joint("peg_free").qposadr[0]
-    peg_dof = model.joint("peg_free").dofadr[0]
-    half_len = 0.5 * cfg.scene.assets.peg_length
-    block_top = cfg.scene.assets.block_size[2]
-    hx, hy = cfg.scene.hole_xy
-    pad_body = model.body(GRIPPER_PREFIX + "left_pad").id
-    peg_body = model.body("peg").id
-    succ = cfg.success
-    phase_index = {p: float(i) for i, p in enumerate(PHASE_ORDER)}
-
-    def observe(mags: list[float]) -> PegObservation:
-        # Plain floats: this runs every control step.
-        px, py, pz, w, x, y, z = data.qpos[peg_adr : peg_adr + 7].tolist()
-        vx, vy, vz = data.qvel[peg_dof : peg_dof + 3].tolist()
-        axis = np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
-        sign = -1.0 if axis[2] >= 0.0 else 1.0  # towards the lower end
-        p = np.array([px, py, pz])
-        bottom = p + (sign * half_len) * axis
-        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-        return PegObservation(p, np.array([w, x, y, z]), axis, bottom, speed, mags[_BLOCK_PEG])
-
-    controller.reset(reader.control_state(data))
-    mags, pens = reader.pair_forces(data)
-    peg = observe(mags)
-    fsm.start(float(data.time), reader.control_state(data), peg)
-
-    status, reason, detail = "failure", "timeout", "step limit reached"
-    peak_block = peak_any = max_pen = grip_pen = slip = 0.0
-    inserted_steps = 0
-    time_to_insert: float | None = None
-    slip_ref: np.ndarray | None = None
-    axis_ref: np.ndarray | None = None
-    warnings0 = int(data.warning.number.sum())
-    depth = lateral = tilt = 0.0
-    step = 0
-    next_log = cfg.log.interval
-    logged_phases = 0
+    loop = build_loop(cfg)
+    steps_log = StepLogRecorder(logger, cfg.log.interval)
+    recorders: list[Recorder] = [steps_log]
+    if cfg.log.trace:
+        recorders.insert(0, TraceRecorder(logger, loop.task.phases))
+    camera = VideoRecorder(loop.model, out_dir / "episode.mp4") if video else None
+    if camera is not None:
+        recorders.append(camera)
+    if on_step is not None:
+        recorders.append(CallbackRecorder(on_step))
+    loop.recorders = recorders
+    loop.reset(np.random.default_rng(cfg.seed))
     wall0 = time.perf_counter()
-    try:
-        while step < cfg.max_steps:
-            t = float(data.time)
-            cs = reader.control_state(data)
-            if noise_rng is not None:
-                cs = _noisy(cs, cfg.domain, noise_rng)
-            try:
-                target = fsm.update(t, cs, peg)
-            except GraspLost as exc:
-                raise _Failure("grasp_lost", str(exc)) from None
-            try:
-                out = controller.compute(cs, target)
-            except ValueError as exc:  # a non-finite state reaches the controller first
-                raise _Failure("diverged", f"controller rejected the state: {exc}") from None
-            data.ctrl[:] = out.ctrl
-            mujoco.mj_step(model, data, nstep=decimation)
-            step += decimation
+    outcome = loop.run(cfg.max_steps)
+    wall = time.perf_counter() - wall0
+    steps_log.flush(loop)
+    result = _result(cfg, loop, outcome, wall, logger)
+    logger.close({"event": "end", **result.to_dict()})
+    if camera is not None:
+        result.video_path = camera.close()
+    if plot:
+        from peg_ctrl.plots import plot_force_profile
 
-            # -- observations after the step ------------------------------------------------
-            mags, pens = reader.pair_forces(data)
-            peg = observe(mags)
-            peak_block = max(peak_block, mags[_BLOCK_PEG])
-            peak_any = max(peak_any, max(mags))
-            max_pen = max(max_pen, pens[0], pens[2])
-            grip_pen = max(grip_pen, pens[1])
-            if cfg.log.trace:
-                logger.trace((float(data.time), phase_index[fsm.phase], *mags, max(pens)))
-
-            # -- failure checks ---------------------------------------------------------------
-            if step % (10 * decimation) == 0 and (
-                int(data.warning.number.sum()) != warnings0
-                or not math.isfinite(float(data.qpos.sum() + data.qvel.sum()))
-            ):  # checked every 10 control steps: MuJoCo's own warnings catch blow-ups at once
-                raise _Failure("diverged", "non-finite state or MuJoCo warning")
-            if max(mags) > succ.force_spike:
-                pair = "-".join(PAIRS[int(np.argmax(mags))])
-                raise _Failure(
-                    "force_spike", f"{pair} contact force {max(mags):.1f} N > {succ.force_spike} N"
-                )
-            if fsm.grasped:
-                r_pad = data.xmat[pad_body].reshape(3, 3)
-                rel = r_pad.T @ (data.xpos[peg_body] - data.xpos[pad_body])
-                axis_pad = r_pad.T @ peg.axis_world
-                if slip_ref is None or axis_ref is None:
-                    slip_ref, axis_ref = rel, axis_pad
-                slip = max(slip, float(np.linalg.norm(rel - slip_ref)))
-                if float(np.linalg.norm(peg.p_world - cs.p_world)) > succ.grasp_lost_distance:
-                    raise _Failure("grasp_lost", "peg left the pads while held")
-                in_hand = math.acos(min(1.0, abs(float(axis_pad @ axis_ref))))
-                if in_hand > succ.max_in_hand_tilt:
-                    raise _Failure("excessive_tilt", f"peg turned {in_hand:.2f} rad in the pads")
-
-            # -- success ----------------------------------------------------------------------
-            axis = peg.axis_world
-            depth = block_top - float(peg.bottom_world[2])
-            tilt = math.acos(min(1.0, abs(float(axis[2]))))
-            if abs(axis[2]) > 1e-6:
-                s = (block_top - peg.p_world[2]) / axis[2]
-                lateral = math.hypot(peg.p_world[0] + s * axis[0] - hx, peg.p_world[1] + s * axis[1] - hy)
-            else:
-                lateral = math.inf
-            ok = depth >= succ.min_depth and lateral <= succ.max_lateral_error and tilt <= succ.max_tilt
-            if ok and fsm.released:
-                inserted_steps += 1
-                if time_to_insert is None:
-                    time_to_insert = float(data.time)
-            else:
-                inserted_steps = 0
-                time_to_insert = None
-
-            # -- logging ----------------------------------------------------------------------
-            while len(fsm.records) > logged_phases + 1 or (
-                fsm.phase is Phase.DONE and len(fsm.records) > logged_phases
-            ):
-                rec = fsm.records[logged_phases]
-                if rec.t_end is None:
-                    break
-                logger.record({"event": "phase", **dataclasses.asdict(rec)})
-                logged_phases += 1
-            if step >= next_log:
-                next_log += cfg.log.interval
-                logger.record(_step_record(step, fsm.phase.value, target, cs, reader, data, peg, out))
-            if recorder is not None:
-                recorder.maybe_capture(data)
-            if on_step is not None:
-                on_step(model, data)
-
-            if inserted_steps >= succ.consecutive_steps:
-                status, reason, detail = "success", "", "inserted"
-                fsm.finish(float(data.time), "inserted")
-                break
-            if fsm.phase is Phase.DONE:
-                if tilt > succ.max_tilt:
-                    reason, detail = "excessive_tilt", f"peg came to rest tilted {tilt:.2f} rad"
-                else:
-                    reason, detail = (
-                        "timeout",
-                        f"peg not inserted (depth {depth * 1e3:.1f} mm, lateral {lateral * 1e3:.1f} mm)",
-                    )
-                break
-    except _Failure as failure:
-        reason, detail = failure.reason, failure.detail
-        fsm.finish(float(data.time), failure.reason)
-    except KeyboardInterrupt:
-        status, reason, detail = "interrupted", "interrupted", "Ctrl-C"
-        fsm.finish(float(data.time), "interrupted")
-        raise
-    finally:
-        wall = time.perf_counter() - wall0
-        if status != "success" and step >= cfg.max_steps:
-            fsm.finish(float(data.time), "timeout")
-        for rec in fsm.records[logged_phases:]:
-            logger.record({"event": "phase", **dataclasses.asdict(rec)})
-        _, resting_pens = reader.pair_forces(data)
-        result = EpisodeResult(
-            status=status,
-            reason=reason,
-            phase=fsm.phase.value if fsm.phase is not Phase.DONE else fsm.records[-1].phase,
-            controller=cfg.controller.name,
-            planner=cfg.planner,
-            seed=cfg.seed,
-            total_timesteps=step,
-            sim_time_s=float(data.time),
-            wall_time_s=wall,
-            peak_contact_force_n=peak_block,
-            peak_any_contact_force_n=peak_any,
-            insertion_depth_m=depth,
-            lateral_error_m=lateral,
-            tilt_rad=tilt,
-            max_penetration_m=max_pen,
-            resting_penetration_m=max(resting_pens),
-            grip_penetration_m=grip_pen,
-            peg_slip_m=slip,
-            time_to_insert_s=time_to_insert,
-            detail=detail,
-            log_path=str(logger.log_path),
-            trace_path=str(logger.npz_path),
-            phases=[dataclasses.asdict(r) for r in fsm.records],
+        result.plot_path = str(
+            plot_force_profile(logger.npz_path, result.phases, out_dir / "force_profile.png")
         )
-        logger.close({"event": "end", **result.to_dict()})
-        if recorder is not None:
-            result.video_path = recorder.close()
-        if plot:
-            from peg_ctrl.plots import plot_force_profile
-
-            result.plot_path = str(
-                plot_force_profile(logger.npz_path, result.phases, out_dir / "force_profile.png")
-            )
-        (out_dir / "summary.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    atomic_write_text(out_dir / "summary.json", json.dumps(result.to_dict(), indent=2) + "\n")
+    if outcome.status == "interrupted":
+        raise KeyboardInterrupt
     return result
 
 
-def _noisy(cs: Any, domain: DomainConfig, rng: np.random.Generator) -> Any:
-    """The control state as a noisy sensor suite would report it."""
-    return cs._replace(
-        p_world=cs.p_world + rng.normal(0.0, domain.position_noise, 3),
-        v_world=cs.v_world + rng.normal(0.0, domain.velocity_noise, 3),
-        omega_body=cs.omega_body + rng.normal(0.0, domain.velocity_noise, 3),
-        ft_wrench=cs.ft_wrench + rng.normal(0.0, domain.force_noise, 6),
+def _result(
+    cfg: EpisodeConfig, loop: Loop, outcome: LoopOutcome, wall: float, logger: EpisodeLogger
+) -> EpisodeResult:
+    task = loop.task
+    assert isinstance(task, PickAndPlaceTask)
+    m = task.insertion.last
+    depth, lateral, tilt = (m.depth_m, m.lateral_error_m, m.tilt_rad) if m is not None else (0.0, 0.0, 0.0)
+    _, resting = loop.reader.pair_forces(loop.data)
+    records = task.records
+    grasp = loop.grasp
+    return EpisodeResult(
+        status=outcome.status,
+        reason=outcome.reason,
+        phase=task.phase if task.phase != "done" else records[-1].phase,
+        controller=cfg.controller.name,
+        planner=cfg.planner,
+        seed=cfg.seed,
+        total_timesteps=loop.steps,
+        sim_time_s=float(loop.data.time),
+        wall_time_s=wall,
+        peak_contact_force_n=loop.contact.peak_block,
+        peak_any_contact_force_n=loop.contact.peak_any,
+        insertion_depth_m=depth,
+        lateral_error_m=lateral,
+        tilt_rad=tilt,
+        max_penetration_m=loop.contact.max_penetration,
+        resting_penetration_m=max(resting),
+        grip_penetration_m=loop.contact.grip_penetration,
+        peg_slip_m=grasp.slip if grasp is not None else 0.0,
+        time_to_insert_s=task.time_to_insert,
+        detail=outcome.detail,
+        log_path=str(logger.log_path),
+        trace_path=str(logger.npz_path),
+        phases=[r.to_dict() for r in records],
     )
-
-
-def _step_record(
-    step: int,
-    phase: str,
-    target: Any,
-    cs: Any,
-    reader: StateReader,
-    data: mujoco.MjData,
-    peg: PegObservation,
-    out: Any,
-) -> dict[str, Any]:
-    """The SPEC §7 per-step record."""
-    return {
-        "event": "step",
-        "step": step,
-        "t": round(float(data.time), 6),
-        "phase": phase,
-        "command": {
-            "position": _round(target.p_world),
-            "quat": _round(target.quat_world),
-            "omega_body": _round(target.omega_body),
-            "jaw_sep_m": round(float(target.jaw_sep_m), 6),
-        },
-        "gripper": {
-            "position": _round(cs.p_world),
-            "euler": _round(quat_to_euler(cs.quat_world)),
-            "quat": _round(cs.quat_world),
-            "jaw_sep_m": round(float(cs.jaw_sep_m), 6),
-        },
-        "peg": {"position": _round(peg.p_world), "quat": _round(peg.quat_world)},
-        "contacts": [c.to_dict() for c in reader.contacts(data)],
-        "controller": {
-            "solve_time_s": out.diagnostics.solve_time_s,
-            "status": out.diagnostics.status,
-            "iterations": out.diagnostics.iterations,
-        },
-    }
-
-
-class _VideoRecorder:
-    """Offscreen frames from the ``insertion`` camera at ``fps``, written as MP4 at the end."""
-
-    def __init__(
-        self, model: mujoco.MjModel, path: Path, *, fps: int = 30, size: tuple[int, int] = (480, 640)
-    ) -> None:
-        import imageio.v2 as imageio
-
-        self.path = path
-        self.fps = fps
-        self._period = 1.0 / fps
-        self._next = 0.0
-        self._renderer = mujoco.Renderer(model, *size)
-        self._writer = imageio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=8)
-
-    def maybe_capture(self, data: mujoco.MjData) -> None:
-        if data.time + 1e-9 < self._next:
-            return
-        self._next += self._period
-        self._renderer.update_scene(data, camera="insertion")
-        self._writer.append_data(self._renderer.render())
-
-    def close(self) -> str:
-        self._writer.close()
-        self._renderer.close()
-        return str(self.path)

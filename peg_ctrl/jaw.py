@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["JawCalibration", "measure", "fit", "load_default", "DEFAULT_PATH"]
+__all__ = ["JawCalibration", "measure", "fit", "load_default", "source_tree_path", "DEFAULT_PATH"]
 
 DEFAULT_PATH = Path(str(resources.files("peg_ctrl") / "data" / "jaw_calibration.json"))
 BYTE_MAX = 255.0
@@ -85,6 +85,15 @@ class JawCalibration:
 def load_default() -> JawCalibration:
     """The calibration shipped with the package."""
     return JawCalibration.from_file(DEFAULT_PATH)
+
+
+def source_tree_path() -> Path | None:
+    """The shipped table's file in a source checkout (where ``peg-sim calibrate`` regenerates it),
+    or ``None`` in an installed copy, whose package files must not be rewritten."""
+    package = Path(__file__).resolve().parent
+    if not (package.parent / "pyproject.toml").is_file():
+        return None
+    return package / "data" / "jaw_calibration.json"
 
 
 def measure(

@@ -13,13 +13,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from peg_ctrl.errors import AssetError
+
 __all__ = ["GripperNotFound", "gripper_xml"]
 
 _RELATIVE = Path("robotiq_2f85") / "2f85.xml"
 
 
-class GripperNotFound(RuntimeError):
-    """No source of the Menagerie Robotiq 2F-85 model could be found."""
+class GripperNotFound(AssetError):
+    """No source of the Menagerie Robotiq 2F-85 model could be found; the message says what to install."""
 
 
 def _from_env() -> Path | None:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 import shutil
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -217,6 +216,9 @@ def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> N
 def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     root = spec.worldbody.add_body()
     root.name = "gripper_root"
+    # An explicit inertial needs its position too: MjSpec's default ``ipos`` is NaN ("unset"),
+    # which the compiler takes as the body origin but ``to_xml`` answers by dropping the inertial.
+    root.ipos = [0.0, 0.0, 0.0]
     root.mass = 0.1
     root.inertia = [0.01, 0.01, 0.01]
     root.explicitinertial = True
@@ -409,28 +411,6 @@ def build_model(cfg: SceneConfig | None = None) -> mujoco.MjModel:
     return build_spec(cfg).compile()
 
 
-def _restore_explicit_inertials(spec: mujoco.MjSpec, root: Any) -> None:
-    """Re-add ``<inertial>`` elements that ``MjSpec.to_xml`` drops for some bodies.
-
-    Seen with MuJoCo 4.0: a body whose inertial was set through the spec API (``gripper_root``)
-    is written without it, which would silently change its mass.
-    """
-    import xml.etree.ElementTree as ET
-
-    by_name = {b.get("name"): b for b in root.iter("body")}
-    for body in spec.bodies:
-        elem = by_name.get(body.name)
-        if elem is None or not body.explicitinertial or elem.find("inertial") is not None:
-            continue
-        inertial = ET.Element(
-            "inertial",
-            pos=" ".join(repr(float(v)) for v in body.ipos),
-            mass=repr(float(body.mass)),
-            diaginertia=" ".join(repr(float(v)) for v in body.inertia),
-        )
-        elem.insert(0, inertial)
-
-
 def build_robot_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
     """Only the base stack and the gripper (no table, peg, block, sensors or keyframes): the
     robot model for other dynamics libraries (Pinocchio)."""
@@ -503,7 +483,6 @@ def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
         dst_name = (elem.get("name") or Path(src).stem).replace("/", "_") + Path(src).suffix
         shutil.copyfile(src, mesh_dir / dst_name)
         elem.set("file", dst_name)
-    _restore_explicit_inertials(spec, root)
     compiler = root.find("compiler")
     if compiler is None:
         compiler = ET.Element("compiler")

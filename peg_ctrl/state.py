@@ -22,7 +22,17 @@ from numpy.typing import NDArray
 
 from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, SLIDE_JOINTS, contact_sensor_name
 
-__all__ = ["ControlState", "PairContact", "SimState", "StateReader", "BODY_GROUPS", "PAIRS", "PEG_PARTNERS"]
+__all__ = [
+    "ControlState",
+    "PegObservation",
+    "PairContact",
+    "SimState",
+    "StateReader",
+    "BODY_GROUPS",
+    "PAIRS",
+    "PEG_PARTNERS",
+    "BLOCK_PEG",
+]
 
 BODY_GROUPS = ("gripper", "peg", "block", "table")
 # Every unordered pair of distinct groups, names in alphabetical order (the order used in logs).
@@ -30,6 +40,7 @@ PAIRS: tuple[tuple[str, str], ...] = tuple(
     sorted((min(a, b), max(a, b)) for i, a in enumerate(BODY_GROUPS) for b in BODY_GROUPS[i + 1 :])
 )
 PEG_PARTNERS = ("block", "gripper", "table")  # groups the peg's penetration is tracked against
+BLOCK_PEG = PAIRS.index(("block", "peg"))  # index of the peg-block pair in PAIRS
 
 
 _NO_WRENCH = np.zeros(6)
@@ -53,6 +64,22 @@ class ControlState(NamedTuple):
     omega_body: NDArray[np.float64]
     jaw_sep_m: float
     ft_wrench: NDArray[np.float64] = _NO_WRENCH
+
+
+class PegObservation(NamedTuple):
+    """The peg's state after a physics step (world frame).
+
+    ``p_world`` (3,) [m] centre; ``quat_world`` (4,); ``axis_world`` (3,) unit axis;
+    ``bottom_world`` (3,) [m] the lower end of the axis; ``speed`` [m/s] of the centre;
+    ``force_block`` [N] the net peg-block contact force.
+    """
+
+    p_world: NDArray[np.float64]
+    quat_world: NDArray[np.float64]
+    axis_world: NDArray[np.float64]
+    bottom_world: NDArray[np.float64]
+    speed: float
+    force_block: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -184,6 +211,18 @@ class StateReader:
         v = data.qvel[self._v0 : self._v0 + 6].copy()
         ft = data.sensordata[self._ft : self._ft + 6].copy() if self._ft >= 0 else np.zeros(6)
         return ControlState(float(data.time), q[:3], q[3:], v[:3], v[3:], self.jaw_sep_m(data), ft)
+
+    def peg(self, data: mujoco.MjData, force_block: float, half_length: float) -> PegObservation:
+        """The peg's pose, axis and lower end; ``half_length`` [m] is half the peg's length."""
+        # Plain floats: this runs every control step.
+        px, py, pz, w, x, y, z = data.qpos[self._peg_q : self._peg_q + 7].tolist()
+        vx, vy, vz = data.qvel[self._peg_v : self._peg_v + 3].tolist()
+        axis = np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
+        sign = -1.0 if axis[2] >= 0.0 else 1.0  # towards the lower end
+        p = np.array([px, py, pz])
+        bottom = p + (sign * half_length) * axis
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        return PegObservation(p, np.array([w, x, y, z]), axis, bottom, speed, force_block)
 
     def contacts(self, data: mujoco.MjData) -> tuple[PairContact, ...]:
         """Contacts above the threshold, summed per body-group pair, sorted by pair name."""

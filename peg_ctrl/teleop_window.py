@@ -12,13 +12,15 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from peg_ctrl.errors import PegCtrlError
 from peg_ctrl.teleop import HELP_TITLES, HELP_VALUES, TeleopSession
 
 __all__ = ["run_window", "WindowUnavailable"]
 
 
-class WindowUnavailable(RuntimeError):
-    """No window system (no DISPLAY, or GLFW failed to initialise)."""
+class WindowUnavailable(PegCtrlError, RuntimeError):
+    """No window system (no DISPLAY, or GLFW failed to initialise): the user's environment, not a
+    bug, so the command line reports it in one line with exit code 2."""
 
 
 def _key_names() -> dict[int, str]:

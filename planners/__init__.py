@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from planners.base import MotionLimits, Planner, RotationPath, Trajectory, Waypoint
-from planners.fixed_speed import FixedSpeedPlanner
-from planners.ruckig_planner import PlanningError, RuckigPlanner
+from peg_ctrl.planners.base import MotionLimits, Planner, RotationPath, Trajectory, Waypoint
+from peg_ctrl.planners.fixed_speed import FixedSpeedPlanner
+from peg_ctrl.planners.ruckig_planner import PlanningError, RuckigPlanner
 
 __all__ = [
     "MotionLimits",

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
-from planners.base import MotionLimits, RotationPath, Waypoint
+from peg_ctrl.planners.base import MotionLimits, RotationPath, Waypoint
 
 __all__ = ["FixedSpeedPlanner", "LinearMotion"]
 

@@ -11,7 +11,7 @@ from ruckig import InputParameter, Result, Ruckig, Synchronization
 from ruckig import Trajectory as RuckigTrajectory
 
 from peg_ctrl.commands import GripperTarget
-from planners.base import MotionLimits, RotationPath, Waypoint
+from peg_ctrl.planners.base import MotionLimits, RotationPath, Waypoint
 
 __all__ = ["RuckigPlanner", "RuckigMotion", "PlanningError"]
 

@@ -1,18 +1,39 @@
-"""Shared fixtures: the default scene compiled once per test session."""
+"""Shared fixtures: the default scene compiled once per test session; tests run outside the tree."""
 
 from __future__ import annotations
+
+import os
+from collections.abc import Iterator
 
 import mujoco
 import numpy as np
 import pytest
 
-from controllers import make_controller
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers import make_controller
 from peg_ctrl.scene import build_model
-from peg_ctrl.sim import Simulation
+from peg_ctrl.tracker import Tracker
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 HOME = np.array([-0.2, 0.0, 0.2])
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _run_outside_the_repository(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """MuJoCo writes MUJOCO_LOG.TXT into the working directory on warnings, and generated meshes
+    go to a cache: keep both out of the repository and out of the user's cache."""
+    cwd = os.getcwd()
+    cache = os.environ.get("PEG_CTRL_CACHE")
+    os.environ["PEG_CTRL_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    os.chdir(tmp_path_factory.mktemp("cwd"))
+    try:
+        yield
+    finally:
+        os.chdir(cwd)
+        if cache is None:
+            os.environ.pop("PEG_CTRL_CACHE", None)
+        else:
+            os.environ["PEG_CTRL_CACHE"] = cache
 
 
 @pytest.fixture(scope="session")
@@ -21,8 +42,8 @@ def model() -> mujoco.MjModel:
 
 
 @pytest.fixture()
-def sim(model: mujoco.MjModel) -> Simulation:
-    return Simulation(model, make_controller("pd", model))
+def sim(model: mujoco.MjModel) -> Tracker:
+    return Tracker(model, make_controller("pd", model))
 
 
 def target(p, quat=IDENTITY, *, jaw: float = 0.085, v=(0.0, 0.0, 0.0), w=(0.0, 0.0, 0.0)) -> GripperTarget:

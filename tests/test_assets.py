@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import filecmp
+import multiprocessing
+import os
 from pathlib import Path
 
 import mujoco
@@ -14,10 +16,13 @@ from peg_ctrl.assets import (
     AssetParams,
     block_parts,
     block_visual,
-    default_assets_dir,
+    cache_dir,
+    ensure_assets,
     peg_mesh,
+    reference_assets_dir,
     write_assets,
 )
+from peg_ctrl.errors import OutputError
 from peg_ctrl.scene import SceneConfig, build_model
 
 PARAMS = [
@@ -44,8 +49,75 @@ def test_same_parameters_give_identical_bytes(tmp_path: Path) -> None:
 def test_committed_default_assets_match_the_generator(tmp_path: Path) -> None:
     fresh = write_assets(AssetParams(), tmp_path)
     for _name, path in fresh.items():
-        committed = default_assets_dir() / path.name
+        committed = reference_assets_dir() / path.name
         assert filecmp.cmp(path, committed, shallow=False), f"{committed} is stale; regenerate"
+
+
+@pytest.fixture()
+def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("PEG_CTRL_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache" / "assets"
+
+
+def _tree(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")}
+
+
+def test_ensure_assets_writes_only_into_the_cache(cache: Path) -> None:
+    package = Path(__file__).resolve().parent.parent / "peg_ctrl"
+    before = _tree(package.parent / "assets"), _tree(package)
+    files = ensure_assets(AssetParams())
+    assert cache_dir() == cache
+    for path in files.values():
+        assert path.is_file() and cache in path.parents
+        assert filecmp.cmp(path, reference_assets_dir() / path.name, shallow=False)
+    assert (_tree(package.parent / "assets"), _tree(package)) == before
+    assert ensure_assets(AssetParams()) == files  # the second call reuses the set
+    assert [p.name for p in cache.iterdir()] == [files["peg"].parent.name]  # no staging left
+
+
+def test_cache_location_follows_the_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.delenv("PEG_CTRL_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "peg_ctrl" / "assets"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert cache_dir() == tmp_path / "home" / ".cache" / "peg_ctrl" / "assets"
+
+
+def test_an_incomplete_cached_set_is_replaced(cache: Path) -> None:
+    files = ensure_assets(AssetParams(n_parts=6))
+    files["object_03"].unlink()
+    files["peg"].write_bytes(b"torn")
+    again = ensure_assets(AssetParams(n_parts=6))
+    assert again == files
+    fresh = write_assets(AssetParams(n_parts=6), cache.parent / "check")
+    for name, path in again.items():
+        assert filecmp.cmp(path, fresh[name], shallow=False), name
+
+
+def _generate(params: AssetParams) -> dict[str, bytes]:
+    return {name: path.read_bytes() for name, path in ensure_assets(params).items()}
+
+
+def test_concurrent_processes_generate_the_same_set_safely(cache: Path) -> None:
+    params = AssetParams(clearance=0.0005)
+    ctx = multiprocessing.get_context("spawn")  # the environment (PEG_CTRL_CACHE) is inherited
+    with ctx.Pool(4) as pool:
+        results = pool.map(_generate, [params] * 8)
+    assert all(r == results[0] for r in results)
+    fresh = write_assets(params, cache.parent / "check")
+    assert results[0] == {name: path.read_bytes() for name, path in fresh.items()}
+    assert len(list(cache.iterdir())) == 1, "staging directories were left behind"
+
+
+def test_an_unwritable_cache_is_one_clear_error(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    monkeypatch.setenv("PEG_CTRL_CACHE", str(blocker))
+    with pytest.raises(OutputError, match="PEG_CTRL_CACHE"):
+        ensure_assets(AssetParams(n_parts=5))
+    assert os.listdir(tmp_path) == ["a_file"]
 
 
 def test_default_has_ten_parts() -> None:

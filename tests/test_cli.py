@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +13,10 @@ from pathlib import Path
 import mujoco
 import pytest
 
+from peg_ctrl import cli
 from peg_ctrl.cli import main
+from peg_ctrl.errors import DivergenceError
+from peg_ctrl.teleop_window import WindowUnavailable
 
 SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep"]
 
@@ -79,7 +84,8 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (["bench", "--steps", "5"], "--steps must be >= 100"),
         (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
-        (["sweep"], "the following arguments are required: config"),
+        (["sweep"], "one of the arguments config --list is required"),
+        (["sweep", "nope"], "no shipped experiment has that name; shipped: clearance, guarded, quick"),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
             ["run", "--controller", "nope"],
@@ -91,10 +97,144 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
     ],
 )
 def test_user_errors_are_one_line_with_exit_2(argv, message, tmp_path: Path) -> None:
-    proc = subprocess.run(
-        [sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=tmp_path
-    )
-    assert proc.returncode == 2
+    _assert_one_line_error(_peg_sim(argv, cwd=tmp_path), message)
+    assert list(tmp_path.iterdir()) == [], "bad input must be rejected before any output is created"
+
+
+def _peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
+
+
+def _assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) -> None:
+    assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("peg-sim: error: ") and message in lines[0]
+    assert lines[0].startswith("peg-sim: error: ") and message in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("command", ["run", "model", "teleop --scripted", "sweep quick"])
+def test_out_that_is_a_regular_file_is_one_line_with_exit_2(command: str, tmp_path: Path) -> None:
+    target = tmp_path / "results"
+    target.write_text("not a directory")
+    proc = _peg_sim([*command.split(), "--out", str(target)], cwd=tmp_path)
+    _assert_one_line_error(proc, f"output directory {str(target)!r} is not a directory")
+    assert target.read_text() == "not a directory"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--out", "{file}/sub"],
+        ["model", "--out", "{file}/sub/deeper"],
+        ["bench", "--controller", "pd", "--out", "{file}/bench.json"],
+        ["calibrate", "--out", "{file}/jaw.json"],
+    ],
+)
+def test_out_under_a_file_is_one_line_with_exit_2(argv: list[str], tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("")
+    argv = [a.format(file=tmp_path / "file") for a in argv]
+    _assert_one_line_error(_peg_sim(argv, cwd=tmp_path), f"its parent {str(tmp_path / 'file')!r} is a file")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root can write to read-only directories")
+@pytest.mark.parametrize("command", ["run", "model"])
+def test_read_only_out_is_one_line_with_exit_2(command: str, tmp_path: Path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    try:
+        _assert_one_line_error(_peg_sim([command, "--out", str(ro)], cwd=tmp_path), "is not writable")
+    finally:
+        ro.chmod(stat.S_IRWXU)
+
+
+def test_bench_out_that_is_a_directory_is_rejected(tmp_path: Path) -> None:
+    _assert_one_line_error(
+        _peg_sim(["bench", "--controller", "pd", "--out", str(tmp_path)], cwd=tmp_path), "is a directory"
+    )
+
+
+def _fake_command(monkeypatch: pytest.MonkeyPatch, exc: BaseException) -> None:
+    def command(args):  # type: ignore[no-untyped-def]
+        raise exc
+
+    monkeypatch.setattr(cli, "_cmd_model", command)
+
+
+@pytest.mark.parametrize(
+    "exc, message",
+    [
+        (
+            OSError(errno.ENOSPC, "No space left on device", "out/log.jsonl"),
+            "'out/log.jsonl': No space left on device",
+        ),
+        (PermissionError(errno.EACCES, "Permission denied", "/x"), "'/x': Permission denied"),
+        (WindowUnavailable("GLFW could not open a window"), "GLFW could not open a window"),
+    ],
+)
+def test_os_and_environment_errors_exit_2(
+    exc: BaseException, message: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _fake_command(monkeypatch, exc)
+    assert main(["model", "--out", "x"]) == 2
+    assert capsys.readouterr().err == f"peg-sim: error: {message}\n"
+
+
+def test_ctrl_c_exits_130(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    _fake_command(monkeypatch, KeyboardInterrupt())
+    assert main(["model", "--out", "x"]) == 130
+    assert capsys.readouterr().err == "peg-sim: interrupted\n"
+
+
+@pytest.mark.parametrize(
+    "exc", [ZeroDivisionError("a bug"), ValueError("a bug"), RuntimeError("a bug"), DivergenceError("nan")]
+)
+def test_bugs_keep_their_traceback(exc: BaseException, monkeypatch: pytest.MonkeyPatch) -> None:
+    _fake_command(monkeypatch, exc)
+    with pytest.raises(type(exc)):
+        main(["model", "--out", "x"])
+
+
+def test_bench_writes_exactly_out(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import peg_ctrl.bench
+
+    def fake(out: Path, **kwargs):  # type: ignore[no-untyped-def]
+        out.write_text("{}")
+        return {"controllers": [], "episodes": []}
+
+    monkeypatch.setattr(peg_ctrl.bench, "run_benchmarks", fake)
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--controller", "pd", "--out", "sub/b.json"]) == 0
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == ["sub", "sub/b.json"]
+    assert main(["bench", "--controller", "pd"]) == 0
+    assert (tmp_path / "bench.json").is_file()
+
+
+def test_bench_sweep_writes_exactly_out(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import peg_ctrl.experiments.runner
+
+    result = {"episodes": 2, "wall_s": {"1": 2.0, "2": 1.0}, "speedup_2_vs_1": 2.0}
+    monkeypatch.setattr(peg_ctrl.experiments.runner, "bench_sweep", lambda n: result)
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--sweep", "--sweep-episodes", "2", "--out", "s/sweep.json"]) == 0
+    assert json.loads((tmp_path / "s" / "sweep.json").read_text()) == result
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["s", "sweep.json"]
+
+
+def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sweep", "--list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    names = [line.split()[0] for line in lines]
+    assert names == ["clearance", "guarded", "quick"]
+    assert lines[2].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
+
+
+def test_sweep_resolves_a_shipped_name_unless_a_file_exists(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    shipped = cli.shipped_experiments()
+    assert cli._resolve_experiment("quick") == shipped["quick"]
+    assert shipped["quick"].is_file()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "quick").write_text("name: mine\n")
+    assert cli._resolve_experiment("quick") == Path("quick")

@@ -10,6 +10,8 @@ import pytest
 
 from peg_ctrl.commands import TaskFrame, command_to_target, euler_to_quat, quat_to_euler
 
+from .conftest import HOME, IDENTITY, target
+
 
 @pytest.mark.parametrize("index, name", list(enumerate(["x", "y", "z", "roll", "pitch", "yaw", "jaw_sep_m"])))
 @pytest.mark.parametrize("bad", [math.nan, math.inf])
@@ -66,3 +68,22 @@ def test_task_frame_is_applied() -> None:
     np.testing.assert_allclose(tgt.p_world, [0.2, 0.1, 0.05], atol=1e-12)
     np.testing.assert_allclose(quat_to_euler(tgt.quat_world), [0.0, 0.0, math.pi / 2], atol=1e-12)
     assert tgt.jaw_sep_m == 0.02
+
+
+@pytest.mark.parametrize("field", ["p", "quat", "v", "w"])
+def test_nan_target_raises(field: str) -> None:
+    kwargs = {"p": HOME.copy(), "quat": IDENTITY.copy(), "v": np.zeros(3), "w": np.zeros(3)}
+    kwargs[field][0] = np.nan
+    p, quat = kwargs.pop("p"), kwargs.pop("quat")
+    names = {"p": "p_world", "quat": "quat_world", "v": "v_world", "w": "omega_body"}
+    with pytest.raises(ValueError, match=names[field]):
+        target(p, quat, **kwargs)
+
+
+def test_target_arrays_are_private_and_read_only() -> None:
+    p = HOME.copy()
+    tgt = target(p)
+    p[0] = 1.0
+    assert tgt.p_world[0] == HOME[0]
+    with pytest.raises(ValueError):
+        tgt.p_world[0] = 0.0

@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers import make_controller
 from peg_ctrl.commands import euler_to_quat
+from peg_ctrl.controllers import make_controller
 from peg_ctrl.scene import build_model
-from peg_ctrl.sim import Simulation
+from peg_ctrl.tracker import Tracker
 
 from .conftest import HOME, target
 
 
 def _run() -> np.ndarray:
     model = build_model()
-    sim = Simulation(model, make_controller("pd", model))
+    sim = Tracker(model, make_controller("pd", model))
     trace = []
     goals = [
         target(HOME + [0.0, 0.0, -0.18], jaw=0.085),

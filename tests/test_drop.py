@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 from peg_ctrl.scene import SceneConfig
-from peg_ctrl.sim import Simulation
 from peg_ctrl.state import StateReader
+from peg_ctrl.tracker import Tracker
 
 from .conftest import target
 
 PARK = (0.5, 0.5, 0.4)  # gripper out of the way [m]
 
 
-def _drop(sim: Simulation, peg_pose: list[float], duration_s: float = 2.0) -> dict[str, float]:
+def _drop(sim: Tracker, peg_pose: list[float], duration_s: float = 2.0) -> dict[str, float]:
     """Release the peg from ``peg_pose`` (7,) and record speed, penetration and energy."""
     model, data = sim.model, sim.data
     model.opt.enableflags |= mujoco.mjtEnableBit.mjENBL_ENERGY
@@ -69,14 +69,14 @@ def _check_rest(result: dict, record_property) -> None:
     assert energy[-1] < energy[0]
 
 
-def test_peg_dropped_on_the_table_comes_to_rest(sim: Simulation, record_property) -> None:
+def test_peg_dropped_on_the_table_comes_to_rest(sim: Tracker, record_property) -> None:
     r = 0.01
     result = _drop(sim, [-0.2, 0.0, r + 0.05, np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0])
     _check_rest(result, record_property)
     assert result["z"] == pytest.approx(r, abs=0.5e-3)
 
 
-def test_upright_peg_dropped_into_the_hole_reaches_the_bottom(sim: Simulation, record_property) -> None:
+def test_upright_peg_dropped_into_the_hole_reaches_the_bottom(sim: Tracker, record_property) -> None:
     cfg = SceneConfig()
     hx, hy = cfg.hole_xy
     half = 0.5 * cfg.assets.peg_length

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from peg_ctrl.config import ConfigError
+from peg_ctrl.controllers import PDConfig
 from peg_ctrl.episode import (
     FAILURE_REASONS,
     EpisodeConfig,
@@ -22,7 +23,7 @@ from peg_ctrl.episode import (
     run_episode,
 )
 from peg_ctrl.episode_log import STEP_FIELDS, TRACE_COLUMNS, read_log, read_trace
-from peg_ctrl.task import SuccessConfig, TaskConfig
+from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig, initial_qpos
 
 RANDOM = RandomizationConfig(enabled=True)
 SUMMARY_KEYS = {
@@ -127,14 +128,18 @@ def test_same_seed_same_episode(tmp_path: Path) -> None:
 
 
 def test_different_seeds_start_differently(tmp_path: Path) -> None:
-    from peg_ctrl.episode import initial_qpos
     from peg_ctrl.scene import build_model
 
     model = build_model()
-    a = initial_qpos(model, EpisodeConfig(seed=1, randomization=RANDOM))
-    b = initial_qpos(model, EpisodeConfig(seed=2, randomization=RANDOM))
+
+    def start(seed: int) -> np.ndarray:
+        cfg = EpisodeConfig(seed=seed, randomization=RANDOM)
+        return initial_qpos(model, cfg.scene, cfg.randomization, np.random.default_rng(seed))
+
+    a = start(1)
+    b = start(2)
     assert not np.array_equal(a, b)
-    np.testing.assert_array_equal(a, initial_qpos(model, EpisodeConfig(seed=1, randomization=RANDOM)))
+    np.testing.assert_array_equal(a, start(1))
 
 
 @pytest.mark.parametrize(
@@ -219,10 +224,10 @@ def test_config_mapping_errors_name_the_field() -> None:
         episode_config_from_mapping({"seed": "three"})
     with pytest.raises(ConfigError, match=r"kp_pos"):
         episode_config_from_mapping({"controller": {"name": "pd", "kp_pos": -5.0}})
-    with pytest.raises(ConfigError, match=r"task: task.lift_timeout must be finite and >= 0"):
+    with pytest.raises(ConfigError, match=r"^task.lift_timeout must be finite and >= 0"):
         episode_config_from_mapping({"task": {"lift_timeout": -1.0}})
     cfg = episode_config_from_mapping({"controller": {"name": "pd", "kp_pos": 2500.0}, "seed": 4})
-    assert cfg.controller.params == {"kp_pos": 2500.0} and cfg.seed == 4
+    assert cfg.controller == PDConfig(kp_pos=2500.0) and cfg.seed == 4
 
 
 def test_cli_config_file(tmp_path: Path) -> None:

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from experiments.config import expand, experiment_from_mapping, load_experiment
-from experiments.report import wilson_interval
-from experiments.runner import _done, run_sweep
+from peg_ctrl.experiments.config import expand, experiment_from_mapping, load_experiment
+from peg_ctrl.experiments.report import wilson_interval
+from peg_ctrl.experiments.runner import _done, run_sweep
 
 CONFIGS = Path(__file__).resolve().parent.parent / "experiments" / "configs"
 SMALL = """\
@@ -81,7 +81,7 @@ def test_jobs_are_keyed_by_their_full_config() -> None:
 
 def test_report_handles_all_successes(tmp_path: Path) -> None:
     """A 100 % group has a Wilson upper bound a hair below 1: the plot must still draw."""
-    from experiments.report import _plots, summarise
+    from peg_ctrl.experiments.report import _plots, summarise
 
     rows = [
         {

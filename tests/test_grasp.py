@@ -9,7 +9,7 @@ import numpy as np
 
 from peg_ctrl.commands import euler_to_quat
 from peg_ctrl.scene import GRIPPER_PREFIX
-from peg_ctrl.sim import Simulation
+from peg_ctrl.tracker import Tracker
 
 from .conftest import target
 
@@ -24,7 +24,7 @@ def _peg_in_pad(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     return data.xmat[pad].reshape(3, 3).T @ (data.xpos[peg] - data.xpos[pad])
 
 
-def test_grasp_holds_under_acceleration_and_rotation(sim: Simulation, record_property) -> None:
+def test_grasp_holds_under_acceleration_and_rotation(sim: Tracker, record_property) -> None:
     model, data = sim.model, sim.data
     x, y = PEG_XY
     sim.hold(target([x, y, GRASP_Z]), 1.5)

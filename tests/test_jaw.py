@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from peg_ctrl import jaw
-from peg_ctrl.sim import Simulation
+from peg_ctrl.tracker import Tracker
 
 from .conftest import HOME, target
 
@@ -26,7 +26,7 @@ def test_maps_are_inverse() -> None:
 
 
 @pytest.mark.parametrize("sep_mm", [0.0, 5.0, 20.0, 40.0, 60.0, 85.0])
-def test_commanded_separation_is_reached(sim: Simulation, sep_mm: float) -> None:
+def test_commanded_separation_is_reached(sim: Tracker, sep_mm: float) -> None:
     state = sim.hold(target(HOME, jaw=sep_mm / 1e3), 1.5)
     assert state.jaw_sep_m == pytest.approx(sep_mm / 1e3, abs=2e-3)
 
@@ -41,3 +41,9 @@ def test_recalibration_reproduces_the_shipped_table(model) -> None:
     fresh = jaw.calibrate(model)
     shipped = jaw.load_default()
     np.testing.assert_allclose(fresh.sep_m, shipped.sep_m, atol=1e-6)  # 1 um: regenerate if the scene changes
+
+
+def test_calibrate_rewrites_the_packaged_table_only_in_a_source_checkout() -> None:
+    path = jaw.source_tree_path()
+    assert path is not None  # the tests run from the repository
+    assert path == jaw.DEFAULT_PATH.resolve()

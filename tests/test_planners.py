@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from peg_ctrl.commands import euler_to_quat
-from planners import (
+from peg_ctrl.planners import (
     FixedSpeedPlanner,
     MotionLimits,
     RuckigPlanner,

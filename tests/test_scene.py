@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from peg_ctrl import menagerie
+from peg_ctrl.errors import USER_ERRORS, AssetError
 from peg_ctrl.scene import (
     BALL_ACTUATORS,
     BALL_JOINT,
@@ -16,6 +17,7 @@ from peg_ctrl.scene import (
     JAW_ACTUATOR,
     SLIDE_ACTUATORS,
     SLIDE_JOINTS,
+    build_model,
     export_scene,
 )
 
@@ -129,6 +131,24 @@ def test_exported_scene_loads_with_plain_mujoco(tmp_path: Path, model: mujoco.Mj
     np.testing.assert_allclose(loaded.key_qpos, model.key_qpos, atol=1e-15)
     np.testing.assert_allclose(loaded.geom_size, model.geom_size, atol=1e-12)
     np.testing.assert_allclose(loaded.body_mass, model.body_mass, rtol=1e-9)
+
+
+def test_exported_scene_has_no_nan_and_the_same_inertials(tmp_path: Path) -> None:
+    """gripper_root's explicit inertial is written with its position (not MjSpec's NaN "unset")."""
+    path = export_scene(tmp_path / "scene")
+    text = path.read_text()
+    assert "nan" not in text.lower()
+    assert '<inertial pos="0 0 0" mass="0.1" diaginertia="0.01 0.01 0.01"' in text
+    loaded = mujoco.MjModel.from_xml_path(str(path))
+    model = build_model()
+    np.testing.assert_array_equal(loaded.body_mass, model.body_mass)
+    np.testing.assert_array_equal(loaded.body_inertia, model.body_inertia)
+    np.testing.assert_array_equal(loaded.body_ipos, model.body_ipos)
+
+
+def test_gripper_not_found_is_a_user_facing_asset_error() -> None:
+    assert issubclass(menagerie.GripperNotFound, AssetError)
+    assert issubclass(menagerie.GripperNotFound, USER_ERRORS)
 
 
 def test_menagerie_root_override_errors_clearly(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

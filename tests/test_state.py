@@ -6,13 +6,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from peg_ctrl.sim import Simulation
 from peg_ctrl.state import StateReader
+from peg_ctrl.tracker import Tracker
 
 from .conftest import HOME, target
 
 
-def test_control_state_at_home(sim: Simulation) -> None:
+def test_control_state_at_home(sim: Tracker) -> None:
     s = sim.state()
     np.testing.assert_allclose(s.p_world, HOME)
     np.testing.assert_allclose(s.quat_world, [1, 0, 0, 0])
@@ -20,7 +20,7 @@ def test_control_state_at_home(sim: Simulation) -> None:
     assert s.p_world.shape == (3,) and s.quat_world.shape == (4,) and s.omega_body.shape == (3,)
 
 
-def test_resting_peg_contact_balances_its_weight(sim: Simulation, model: mujoco.MjModel) -> None:
+def test_resting_peg_contact_balances_its_weight(sim: Tracker, model: mujoco.MjModel) -> None:
     sim.hold(target(HOME), 0.5)
     full = StateReader(model).sim_state(sim.data)
     table = full.contact("table", "peg")
@@ -34,7 +34,7 @@ def test_resting_peg_contact_balances_its_weight(sim: Simulation, model: mujoco.
     assert full.p_world_peg[2] == pytest.approx(0.01, abs=0.3e-3)
 
 
-def test_contact_dict_has_the_log_fields(sim: Simulation, model: mujoco.MjModel) -> None:
+def test_contact_dict_has_the_log_fields(sim: Tracker, model: mujoco.MjModel) -> None:
     sim.hold(target(HOME), 0.1)
     (c,) = StateReader(model).sim_state(sim.data).contacts
     d = c.to_dict()

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from controllers import REGISTRY
 from peg_ctrl.batch import run_batch
-from peg_ctrl.episode import ControllerSpec, EpisodeConfig, RandomizationConfig
+from peg_ctrl.controllers import REGISTRY
+from peg_ctrl.episode import EpisodeConfig, RandomizationConfig
 
 
 @pytest.mark.slow
@@ -17,7 +17,7 @@ def test_thirty_randomized_episodes(name: str, tmp_path: Path, record_property) 
     jobs = [
         (
             EpisodeConfig(
-                controller=ControllerSpec(name), seed=s, randomization=RandomizationConfig(enabled=True)
+                controller=REGISTRY[name](), seed=s, randomization=RandomizationConfig(enabled=True)
             ),
             tmp_path / f"{s:03d}",
         )

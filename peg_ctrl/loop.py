@@ -1,0 +1,200 @@
+"""The one closed loop. It owns time.
+
+Every control period::
+
+    observe (gripper state, with sensor noise) → task.target → controller.compute → data.ctrl
+    → ``decimation`` physics steps in C (mj_step nstep) → observe the peg and contacts
+    → monitors (divergence, contact force spike, grasp slip) → task.evaluate → recorders
+
+Autonomous episodes, teleoperation and the benchmark are thin drivers of :class:`Loop`; no
+other code steps the physics in a loop (jaw calibration and the benchmark's raw-physics replay
+aside). The control period must be a whole multiple of the physics timestep.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import NamedTuple, Protocol
+
+import mujoco
+import numpy as np
+
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.base import Controller, ControlOutput
+from peg_ctrl.errors import DivergenceError, EpisodeFailure
+from peg_ctrl.monitors import ContactMonitor, DivergenceMonitor, GraspMonitor
+from peg_ctrl.scene import HOME_KEY, SceneConfig
+from peg_ctrl.state import BLOCK_PEG, ControlState, PegObservation, StateReader
+from peg_ctrl.tasks.base import Evaluation, Observation, Task
+from peg_ctrl.timing import control_decimation
+
+__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "DIVERGENCE_CHECK_EVERY"]
+
+DIVERGENCE_CHECK_EVERY = 10  # control steps between divergence checks (MuJoCo warns at once anyway)
+
+
+class SensorNoise:
+    """Zero-mean Gaussian noise on the sensed gripper state; standard deviations in [m], [m/s]
+    (and [rad/s]), [N] (and [N m]); drawn from ``rng``."""
+
+    def __init__(self, *, position: float, velocity: float, force: float, rng: np.random.Generator) -> None:
+        self.position, self.velocity, self.force = position, velocity, force
+        self.rng = rng
+
+    def apply(self, s: ControlState) -> ControlState:
+        rng = self.rng
+        return s._replace(
+            p_world=s.p_world + rng.normal(0.0, self.position, 3),
+            v_world=s.v_world + rng.normal(0.0, self.velocity, 3),
+            omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3),
+            ft_wrench=s.ft_wrench + rng.normal(0.0, self.force, 6),
+        )
+
+
+class StepInfo(NamedTuple):
+    """One control step, for recorders: ``step`` physics steps done, time ``t`` [s] after it."""
+
+    step: int
+    t: float
+    phase: str
+    gripper: ControlState  # as sensed when the step started
+    target: GripperTarget
+    output: ControlOutput
+    peg: PegObservation  # after the step
+    forces: list[float]  # net contact force per pair of state.PAIRS [N]
+    penetrations: list[float]  # per state.PEG_PARTNERS [m]
+
+
+class Recorder(Protocol):
+    """Receives every control step (including the one on which the episode failed)."""
+
+    def record(self, loop: Loop, info: StepInfo) -> None: ...
+
+
+class LoopOutcome(NamedTuple):
+    """How :meth:`Loop.run` ended: ``status`` is "success", "failure" or "interrupted"."""
+
+    status: str
+    reason: str
+    detail: str
+    evaluation: Evaluation | None  # the task's last verdict (None before the first step)
+
+
+@dataclasses.dataclass
+class Loop:
+    """Model, data, controller, task, monitors and recorders, stepped together."""
+
+    model: mujoco.MjModel
+    controller: Controller
+    task: Task
+    scene: SceneConfig
+    contact: ContactMonitor = dataclasses.field(default_factory=ContactMonitor)
+    grasp: GraspMonitor | None = None
+    noise: SensorNoise | None = None
+    recorders: Sequence[Recorder] = ()
+    contact_threshold_n: float = 0.01  # contacts below this are left out of logs [N]
+
+    def __post_init__(self) -> None:
+        self.data = mujoco.MjData(self.model)
+        self.reader = StateReader(self.model, contact_threshold_n=self.contact_threshold_n)
+        self.decimation = control_decimation(self.controller.control_dt, self.model.opt.timestep)
+        self.divergence = DivergenceMonitor(DIVERGENCE_CHECK_EVERY * self.decimation)
+        self._half_length = 0.5 * self.scene.assets.peg_length
+        self._home = self.model.key(HOME_KEY).id
+        self.steps = 0  # physics steps since reset
+        self.last: Evaluation | None = None
+        self.output: ControlOutput | None = None  # the controller's last output
+        self.peg: PegObservation | None = None
+
+    @property
+    def control_dt(self) -> float:
+        """Control period [s]."""
+        return self.decimation * float(self.model.opt.timestep)
+
+    def reset(self, rng: np.random.Generator) -> Observation:
+        """Home keyframe, the task's initial state from ``rng``, one ``mj_forward``; resets the
+        controller, monitors and task. Returns the first (noise-free) observation."""
+        data = self.data
+        mujoco.mj_resetDataKeyframe(self.model, data, self._home)
+        self.task.reset(self.model, data, rng)
+        mujoco.mj_forward(self.model, data)
+        state = self.reader.control_state(data)
+        self.controller.reset(state)
+        forces, _ = self.reader.pair_forces(data)
+        self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
+        obs = Observation(float(data.time), state, self.peg)
+        self.task.start(obs)
+        self.contact.reset()
+        if self.grasp is not None:
+            self.grasp.reset()
+        self.divergence.reset(data)
+        self.steps = 0
+        self.last = None
+        return obs
+
+    def step(self) -> Evaluation:
+        """One control period; raises :class:`EpisodeFailure` if a monitor or the task fails."""
+        data = self.data
+        assert self.peg is not None, "reset() first"
+        state = self.reader.control_state(data)
+        if self.noise is not None:
+            state = self.noise.apply(state)
+        target = self.task.target(Observation(float(data.time), state, self.peg))
+        try:
+            out = self.controller.compute(state, target)
+        except DivergenceError as exc:
+            raise EpisodeFailure("diverged", f"controller rejected the state: {exc}") from None
+        data.ctrl[:] = out.ctrl
+        self.output = out
+        mujoco.mj_step(self.model, data, nstep=self.decimation)
+        self.steps += self.decimation
+        forces, pens = self.reader.pair_forces(data)
+        peg = self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
+        t = float(data.time)
+        failure: EpisodeFailure | None = None
+        try:
+            self.divergence.check(data, self.steps)
+            self.contact.check(forces, pens)
+            if self.grasp is not None and self.task.grasped:
+                self.grasp.check(data, state, peg)
+            self.last = self.task.evaluate(Observation(t, state, peg))
+        except EpisodeFailure as exc:
+            failure = exc
+        info = StepInfo(self.steps, t, self.task.phase, state, target, out, peg, forces, pens)
+        for recorder in self.recorders:
+            recorder.record(self, info)
+        if failure is not None:
+            raise failure
+        assert self.last is not None
+        return self.last
+
+    def advance(self, seconds: float) -> Evaluation | None:
+        """Step for ``seconds`` [s] of simulated time (whole control periods, at least one), or
+        until the task is done. Failures propagate as :class:`EpisodeFailure`."""
+        evaluation = None
+        for _ in range(max(1, round(seconds / self.control_dt))):
+            evaluation = self.step()
+            if evaluation.done:
+                break
+        return evaluation
+
+    def run(self, max_steps: int) -> LoopOutcome:
+        """Step until the task is done, a failure, ``max_steps`` physics steps, or Ctrl-C."""
+        status, reason, detail = "failure", "timeout", "step limit reached"
+        try:
+            while self.steps < max_steps:
+                evaluation = self.step()
+                if evaluation.done:
+                    status = "success" if evaluation.success else "failure"
+                    reason, detail = evaluation.reason, evaluation.detail
+                    break
+        except EpisodeFailure as failure:
+            reason, detail = failure.reason, failure.detail
+            self.task.finish(float(self.data.time), failure.reason)
+        except KeyboardInterrupt:
+            self.task.finish(float(self.data.time), "interrupted")
+            return LoopOutcome("interrupted", "interrupted", "Ctrl-C", self.last)
+        if status != "success" and self.steps >= max_steps:
+            self.task.finish(float(self.data.time), "timeout")
+        return LoopOutcome(status, reason, detail, self.last)

@@ -1,0 +1,99 @@
+"""The task interface: what the loop asks of a task, and what a task reports back.
+
+A task resets the scene from a random generator, turns observations into gripper targets, and
+evaluates named metrics and success or failure after every control step (ManiSkill's
+``evaluate()``). It never steps or forwards the simulation: the loop owns time.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Protocol
+
+import mujoco
+import numpy as np
+
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.state import ControlState, PegObservation
+
+__all__ = ["Observation", "Evaluation", "Task", "PhaseRecord"]
+
+
+class Observation(NamedTuple):
+    """What a task sees at time ``t`` [s]: the gripper as sensed (with any sensor noise) and the peg."""
+
+    t: float
+    gripper: ControlState
+    peg: PegObservation
+
+
+class Evaluation(NamedTuple):
+    """A task's verdict after a control step.
+
+    ``done`` ends the episode; ``success`` says how; ``reason`` (one of
+    :data:`~peg_ctrl.errors.FAILURE_REASONS`, empty on success) and ``detail`` explain a failure;
+    ``metrics`` holds the task's named measurements (a NamedTuple, e.g. an
+    :class:`~peg_ctrl.monitors.InsertionMeasure`).
+    """
+
+    done: bool
+    success: bool
+    reason: str
+    detail: str
+    metrics: Any
+
+
+class PhaseRecord:
+    """One phase of a task: its name, start and end time [s], and outcome ("ok", "timeout", ...)."""
+
+    __slots__ = ("phase", "t_start", "t_end", "outcome")
+
+    def __init__(self, phase: str, t_start: float, t_end: float | None = None, outcome: str = "") -> None:
+        self.phase = phase
+        self.t_start = t_start
+        self.t_end = t_end
+        self.outcome = outcome
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"phase": self.phase, "t_start": self.t_start, "t_end": self.t_end, "outcome": self.outcome}
+
+
+class Task(Protocol):
+    """What the loop needs from a task."""
+
+    name: str
+    phases: tuple[str, ...]  # every phase name, in order (the force trace stores their index)
+
+    @property
+    def phase(self) -> str:
+        """The current phase, for logs."""
+        ...
+
+    @property
+    def grasped(self) -> bool:
+        """Whether the peg is meant to be held (the loop then watches for slip)."""
+        ...
+
+    @property
+    def records(self) -> list[PhaseRecord]:
+        """Phases so far, the current one last."""
+        ...
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Set the initial state in ``data`` (already at the ``home`` keyframe), drawing from ``rng``."""
+        ...
+
+    def start(self, obs: Observation) -> None:
+        """Called once after :meth:`reset`, with the first observation (noise-free)."""
+        ...
+
+    def target(self, obs: Observation) -> GripperTarget:
+        """The gripper target for this control step."""
+        ...
+
+    def evaluate(self, obs: Observation) -> Evaluation:
+        """Metrics and verdict after the physics step (``obs.gripper`` is the state the step started from)."""
+        ...
+
+    def finish(self, t: float, outcome: str) -> None:
+        """The episode ended at ``t`` [s] with ``outcome``: close the open phase record."""
+        ...

@@ -1,0 +1,214 @@
+"""A teleoperation session: the loop with a :class:`TeleopTask`, its logs, resets and summary.
+
+The session is driven by :meth:`TeleopSession.advance` (simulated seconds) from a window or a
+script (:class:`~peg_ctrl.teleop.scripted.ScriptedOperator`).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
+from peg_ctrl.controllers import make_controller
+from peg_ctrl.episode import compiled_model
+from peg_ctrl.episode_log import EpisodeLogger
+from peg_ctrl.io import atomic_write_text
+from peg_ctrl.loop import Loop, StepInfo
+from peg_ctrl.monitors import ContactMonitor
+from peg_ctrl.recorders import TraceRecorder, step_record
+from peg_ctrl.scene import HOME_KEY, SceneConfig
+from peg_ctrl.state import ControlState, PegObservation, StateReader
+from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
+from peg_ctrl.teleop.task import TeleopTask
+from peg_ctrl.timing import control_decimation
+
+__all__ = ["TeleopSession"]
+
+
+class TeleopSession:
+    """Simulation, controller, key mapping, insertion checks and logging for one teleop episode."""
+
+    def __init__(
+        self,
+        out_dir: Path,
+        *,
+        controller: str = "pd",
+        seed: int = 0,
+        randomize: bool = False,
+        config: TeleopConfig | None = None,
+        scene: SceneConfig | None = None,
+    ) -> None:
+        self.cfg = config or TeleopConfig()
+        self.scene = scene or SceneConfig()
+        self.model = compiled_model(self.scene)
+        self.controller_name = controller
+        self.seed = seed
+        self.randomize = randomize
+        self.out_dir = Path(out_dir)
+        self.logger = EpisodeLogger(self.out_dir)
+        ctrl = make_controller(controller, self.model)
+        # The mapper starts at the home pose, jaw open; the task resets it on every attempt.
+        home = mujoco.MjData(self.model)
+        mujoco.mj_resetDataKeyframe(self.model, home, self.model.key(HOME_KEY).id)
+        s = StateReader(self.model).control_state(home)
+        self.mapper = TeleopMapper(
+            self.cfg, p_world=s.p_world, quat_world=s.quat_world, jaw_sep_m=JAW_SEP_MAX_M
+        )
+        decimation = control_decimation(ctrl.control_dt, self.model.opt.timestep)
+        self.task = TeleopTask(
+            self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=decimation
+        )
+        self.loop = Loop(
+            model=self.model,
+            controller=ctrl,
+            task=self.task,
+            scene=self.scene,
+            contact=ContactMonitor(force_spike=None),
+            recorders=[TraceRecorder(self.logger, self.task.phases), self],
+        )
+        self.data = self.loop.data
+        self.attempt = 1
+        self.finished = False
+        self.end_reason = ""
+        self.summary: dict[str, Any] = {}
+        self.wall0 = time.perf_counter()
+        self.loop.reset(np.random.default_rng(seed))
+        self.logger.record(
+            {"event": "teleop_start", "seed": seed, "randomize": randomize, "controller": controller}
+        )
+
+    # -- state --------------------------------------------------------------------------------
+    @property
+    def step_count(self) -> int:
+        """Physics steps over all attempts."""
+        return self.task.step_count
+
+    @property
+    def inserted(self) -> bool:
+        return self.task.inserted
+
+    def state(self) -> ControlState:
+        return self.loop.reader.control_state(self.data)
+
+    def peg(self) -> PegObservation:
+        assert self.loop.peg is not None
+        return self.loop.peg
+
+    # -- driving ------------------------------------------------------------------------------
+    def advance(self, sim_seconds: float) -> None:
+        """Run the loop for ``sim_seconds`` of simulated time (whole control steps, at least one)."""
+        for _ in range(max(1, round(sim_seconds / self.loop.control_dt))):
+            if self.finished:
+                return
+            if self.mapper.quit_requested:
+                self.finish("quit")
+                return
+            if self.mapper.reset_requested:
+                self._reset()
+                if self.finished:
+                    return
+            self.loop.step()
+            if self.step_count >= self.cfg.max_steps:
+                self.finish("timeout")
+
+    def _reset(self) -> None:
+        """Restore the start state (re-randomised from seed + attempt if enabled), SPEC §5."""
+        self.mapper.reset_requested = False
+        if self.attempt >= self.cfg.max_attempts:
+            self.finish("attempts_exhausted")
+            return
+        self.attempt += 1
+        seed = self.seed + self.attempt - 1 if self.randomize else self.seed
+        self.loop.reset(np.random.default_rng(seed))
+        self._inserted_logged = False
+        self.logger.record({"event": "reset", "step": self.step_count, "attempt": self.attempt})
+
+    # -- recording (the session is one of the loop's recorders) ---------------------------------
+    def record(self, loop: Loop, info: StepInfo) -> None:
+        cfg = self.cfg
+        before = self.step_count - loop.decimation
+        if self.step_count // cfg.log_every != before // cfg.log_every:
+            self.logger.record({**_teleop_step(loop, info), "step": self.step_count, **self._log_extra()})
+        if self.step_count // cfg.save_every != before // cfg.save_every:
+            self.logger.record({"event": "save", "step": self.step_count})
+        if self.task.inserted and not self._inserted_logged:
+            self._inserted_logged = True
+            self.logger.record({"event": "inserted", "step": self.step_count, "t": round(info.t, 6)})
+
+    _inserted_logged = False
+
+    def _log_extra(self) -> dict[str, Any]:
+        m = self.mapper
+        return {"phase": "teleop", "attempt": self.attempt, "speed": m.speed, "keys": sorted(m.held)}
+
+    def finish(self, reason: str) -> dict[str, Any]:
+        """End the session: write the episode record (same format as autonomous mode)."""
+        if self.finished:
+            return self.summary
+        self.finished = True
+        self.end_reason = reason
+        check = self.task.insertion.measure(self.peg())
+        inserted = self.task.inserted or self.task.insertion.criterion(check)
+        self.task.finish(float(self.data.time), reason)
+        status = "success" if inserted else "failure"
+        self.summary = {
+            "status": status,
+            "reason": "" if status == "success" else reason,
+            "phase": "teleop",
+            "controller": self.controller_name,
+            "planner": "teleop",
+            "seed": self.seed,
+            "total_timesteps": self.step_count,
+            "sim_time_s": float(self.data.time),
+            "wall_time_s": time.perf_counter() - self.wall0,
+            "attempts": self.attempt,
+            "end": reason,
+            "peg_radial_m": check.radial_m,
+            "peg_bottom_z_m": check.bottom_z_m,
+            "peak_contact_force_n": self.loop.contact.peak_block,
+            "log_path": str(self.logger.log_path),
+            "trace_path": str(self.logger.npz_path),
+        }
+        self.logger.close({"event": "end", **self.summary})
+        atomic_write_text(self.out_dir / "summary.json", _json(self.summary))
+        return self.summary
+
+    # -- overlay ------------------------------------------------------------------------------
+    def overlay_lines(self) -> tuple[str, str]:
+        """Status panel text (titles, values) for the window."""
+        s = self.state()
+        m = self.mapper
+        cmd_rpy = np.degrees(quat_to_euler(m.quat_world))
+        act_rpy = np.degrees(quat_to_euler(s.quat_world))
+        checked = self.task.last_check is not None
+        status = "INSERTED" if self.inserted else ("searching" if checked else "not inserted")
+        titles = "Speed\nJaw\nCmd xyz\nAct xyz\nCmd rpy\nAct rpy\nInsertion\nAttempt\nSim time"
+        values = (
+            f"{m.speed:.2f}x{'  (fine)' if m.fine else ''}\n"
+            f"{s.jaw_sep_m * 1e3:.1f} mm (cmd {m.jaw_sep_m * 1e3:.1f} mm)\n"
+            f"{m.p_world[0]:+.3f} {m.p_world[1]:+.3f} {m.p_world[2]:+.3f} m\n"
+            f"{s.p_world[0]:+.3f} {s.p_world[1]:+.3f} {s.p_world[2]:+.3f} m\n"
+            f"{cmd_rpy[0]:+6.1f} {cmd_rpy[1]:+6.1f} {cmd_rpy[2]:+6.1f} deg\n"
+            f"{act_rpy[0]:+6.1f} {act_rpy[1]:+6.1f} {act_rpy[2]:+6.1f} deg\n"
+            f"{status}\n"
+            f"{self.attempt} / {self.cfg.max_attempts}\n"
+            f"{self.data.time:.2f} s"
+        )
+        return titles, values
+
+
+def _teleop_step(loop: Loop, info: StepInfo) -> dict[str, Any]:
+    entry = step_record(loop, info)
+    del entry["controller"]
+    return entry
+
+
+def _json(data: dict[str, Any]) -> str:
+    import json
+
+    return json.dumps(data, indent=2) + "\n"

@@ -1,0 +1,93 @@
+"""Teleoperation as a task: the operator's keys set the target; the insertion monitor watches."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.monitors import InsertionMeasure, InsertionMonitor, SettledCriterion
+from peg_ctrl.scene import SceneConfig
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord
+from peg_ctrl.tasks.pick_and_place import RandomizationConfig, initial_qpos
+from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
+
+__all__ = ["TeleopTask"]
+
+_RUNNING = Evaluation(False, False, "", "", None)
+
+
+class TeleopTask:
+    """Targets from a :class:`TeleopMapper`, advanced one control period per step.
+
+    Task
+        Whatever the operator does; the peg starts lying on the table (randomised from the
+        reset's generator with ``randomize``).
+    Success
+        SPEC §5: peg centre within ``insert_radius`` of the hole axis, its bottom below block
+        centre + ``insert_height``, speed ≤ ``settle_speed``; checked every ``check_every``
+        physics steps. The episode never ends by itself: the operator quits or resets.
+    """
+
+    name = "teleop"
+    phases = ("teleop",)
+    grasped = False  # the operator may let go at any time: no slip monitoring
+
+    def __init__(
+        self,
+        mapper: TeleopMapper,
+        *,
+        scene: SceneConfig,
+        config: TeleopConfig,
+        randomize: bool,
+        decimation: int,
+    ) -> None:
+        self.mapper = mapper
+        self.scene = scene
+        self.cfg = config
+        self.randomization = RandomizationConfig(enabled=randomize)
+        self.decimation = decimation
+        self.insertion = InsertionMonitor(
+            scene,
+            SettledCriterion(
+                max_radial=config.insert_radius,
+                max_bottom_z=scene.block_pos[2] + config.insert_height,
+                max_speed=config.settle_speed,
+            ),
+        )
+        self.step_count = 0  # physics steps over all attempts
+        self.inserted = False
+        self.last_check: InsertionMeasure | None = None
+        self.records: list[PhaseRecord] = []
+        self._dt = 0.0
+
+    @property
+    def phase(self) -> str:
+        return "teleop"
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        data.qpos[:] = initial_qpos(model, self.scene, self.randomization, rng)
+        self._dt = self.decimation * float(model.opt.timestep)
+        self.mapper.reset_command()
+        self.inserted = False
+
+    def start(self, obs: Observation) -> None:
+        self.records.append(PhaseRecord("teleop", obs.t))
+
+    def target(self, obs: Observation) -> GripperTarget:
+        self.mapper.step(self._dt)
+        return self.mapper.target()
+
+    def evaluate(self, obs: Observation) -> Evaluation:
+        before = self.step_count
+        self.step_count += self.decimation
+        every = self.cfg.check_every
+        if self.step_count // every != before // every:
+            self.last_check = self.insertion.measure(obs.peg)
+            self.inserted = self.inserted or self.insertion.criterion(self.last_check)
+        return _RUNNING
+
+    def finish(self, t: float, outcome: str) -> None:
+        if self.records and self.records[-1].t_end is None:
+            self.records[-1].t_end = t
+            self.records[-1].outcome = outcome

@@ -1,0 +1,116 @@
+"""Admittance: its config (with the inner PD's), its law at a fixed state, and closed loop
+(through :class:`peg_ctrl.tracker.Tracker`, a driver of the episode loop)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from peg_ctrl.commands import euler_to_quat
+from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceController
+from peg_ctrl.controllers.pd import PDConfig, PDController
+from peg_ctrl.state import ControlState
+from peg_ctrl.tracker import Tracker
+
+from ..conftest import HOME, target
+
+
+def test_scaled_scales_its_gains_and_the_inner_pd() -> None:
+    cfg = AdmittanceConfig(stiffness=200.0, inner=PDConfig(kp_pos=1000.0))
+    scaled = cfg.scaled(0.9)
+    assert AdmittanceConfig.GAINS == ("stiffness",)
+    assert scaled.stiffness == 200.0 * 0.9
+    assert scaled.inner == cfg.inner.scaled(0.9)
+    assert scaled.inner.kp_pos == 1000.0 * 0.9
+    assert (scaled.mass, scaled.deadband, scaled.max_offset) == (cfg.mass, cfg.deadband, cfg.max_offset)
+    assert cfg.scaled(1.0) == cfg
+
+
+def test_inner_pd_is_configured_and_runs_at_our_period(model: mujoco.MjModel) -> None:
+    cfg = AdmittanceConfig(control_dt=0.002, inner=PDConfig(kp_pos=1000.0, k_rot=5.0))
+    c = AdmittanceController(model, cfg)
+    assert c.control_dt == 0.002
+    assert c.inner.config == dataclasses.replace(cfg.inner, control_dt=0.002)
+
+
+def _at_rest_wrench(c: AdmittanceController, state: ControlState, push_world: np.ndarray) -> np.ndarray:
+    """The sensor reading for the gripper at rest under its weight and an external push [N]."""
+    f_world = -c._mass_below * c._gravity - push_world  # what external_force() inverts
+    f_site = np.empty(3)
+    q = state.quat_world
+    mujoco.mju_rotVecQuat(f_site, f_world, np.array([q[0], -q[1], -q[2], -q[3]]))
+    return np.array([f_site[0], -f_site[1], -f_site[2], 0.0, 0.0, 0.0])
+
+
+def test_without_contact_it_is_the_inner_pd(model: mujoco.MjModel, home_state: ControlState) -> None:
+    c = AdmittanceController(model)
+    pd = PDController(model, c.inner.config)
+    state = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.zeros(3)))
+    c.reset(state)
+    pd.reset(state)
+    tgt = target(state.p_world + [0.01, 0.0, -0.02], jaw=0.03)
+    for _ in range(5):
+        assert c.compute(state, tgt).ctrl == pd.compute(state, tgt).ctrl
+    assert np.all(c.offset == 0.0)
+
+
+def test_yields_along_a_push_like_a_spring(model: mujoco.MjModel, home_state: ControlState) -> None:
+    """A steady 5 N push: the offset settles at (|F| - deadband) / K along F."""
+    c = AdmittanceController(model)
+    push = np.array([4.0, 0.0, -3.0])
+    state = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, push))
+    c.reset(state)
+    tgt = target(state.p_world)
+    for _ in range(3000):  # 3 s of the virtual dynamics (critically damped, 12 rad/s)
+        c.compute(state, tgt)
+    expected = (5.0 - c.config.deadband) / c.config.stiffness * push / 5.0
+    np.testing.assert_allclose(c.offset, expected, atol=1e-6)
+    c.reset(state)
+    assert np.all(c.offset == 0.0) and np.all(c.force_filtered == 0.0)
+
+
+def test_offset_is_capped(model: mujoco.MjModel, home_state: ControlState) -> None:
+    c = AdmittanceController(model, AdmittanceConfig(max_offset=0.005))
+    state = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.array([0.0, 50.0, 0.0])))
+    c.reset(state)
+    for _ in range(2000):
+        c.compute(state, target(state.p_world))
+    assert np.linalg.norm(c.offset) == pytest.approx(0.005, rel=1e-12)
+
+
+def test_scaled_config_builds_a_working_controller(model: mujoco.MjModel, home_state: ControlState) -> None:
+    c = AdmittanceController(model, AdmittanceConfig().scaled(1.1))
+    c.reset(home_state)
+    ctrl = c.compute(home_state, target(home_state.p_world + [0.01, 0.0, 0.0])).ctrl
+    assert len(ctrl) == model.nu and np.all(np.isfinite(ctrl))
+
+
+# -- closed loop -------------------------------------------------------------------------------
+
+
+def test_closed_loop_yields_along_an_applied_force(model: mujoco.MjModel) -> None:
+    controller = AdmittanceController(model)
+    tracker = Tracker(model, controller)
+    goal = target(HOME)
+    tracker.hold(goal, 0.5)
+    body = model.body("2f85/base").id  # below the sensor, as a contact on the gripper would be
+    tracker.data.xfrc_applied[body, :3] = [4.0, 0.0, -3.0]  # a 5 N push from outside
+    tracker.hold(goal, 1.5)
+    offset = controller.offset
+    assert offset[0] > 1e-3 and offset[2] < -1e-3 and abs(offset[1]) < 1e-4
+    # Spring-like: steady offset ~ (|F| - deadband) / K along F.
+    expected = (5.0 - controller.config.deadband) / controller.config.stiffness
+    assert np.linalg.norm(offset) == pytest.approx(expected, rel=0.15)
+    tracker.data.xfrc_applied[body] = 0.0
+    tracker.hold(goal, 1.5)
+    assert np.linalg.norm(controller.offset) < 1e-4
+
+
+def test_closed_loop_sees_no_force_in_free_space(model: mujoco.MjModel) -> None:
+    controller = AdmittanceController(model)
+    tracker = Tracker(model, controller)
+    tracker.hold(target(HOME, euler_to_quat(1.2, 0.0, 0.4)), 2.0)
+    assert np.linalg.norm(controller.external_force(tracker.state(), np.zeros(3))) < 0.05
