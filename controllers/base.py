@@ -88,8 +88,15 @@ class Controller(Protocol):
     :meth:`compute` every control period and writes ``ControlOutput.ctrl`` into ``data.ctrl``.
     """
 
-    name: str
-    control_dt: float  # control period [s], a whole multiple of the physics timestep
+    @property
+    def name(self) -> str:
+        """The registered name."""
+        ...
+
+    @property
+    def control_dt(self) -> float:
+        """Control period [s], a whole multiple of the physics timestep."""
+        ...
 
     def reset(self, state: ControlState) -> None: ...
 

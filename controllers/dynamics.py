@@ -1,14 +1,15 @@
 """Rigid-body dynamics of the base stack from Pinocchio, built from the scene's own MJCF.
 
-The robot-only MJCF (``peg_ctrl.scene.export_robot``: base stack + gripper, every inertial
-written explicitly) is written to a temporary directory, read with ``pinocchio.buildModelFromMJCF``
-and deleted again; the finger joints are then locked at their open configuration
-(``buildReducedModel``), leaving the 6 base DoF: three slides and the ball joint. Pinocchio
-orders a spherical joint's quaternion ``[x, y, z, w]``; MuJoCo ``[w, x, y, z]`` — converted here. Velocities agree: the ball joint's is in the body frame.
+The robot-only MJCF (``peg_ctrl.scene.export_robot``: base stack + gripper, every inertial written
+explicitly) is written to a temporary directory, read with ``pinocchio.buildModelFromMJCF`` and
+deleted again; the finger joints are then locked at their open configuration
+(``buildReducedModel``), leaving the 6 base DoF: three slides and the ball joint. Pinocchio orders a
+spherical joint's quaternion ``[x, y, z, w]``; MuJoCo ``[w, x, y, z]`` — converted here. Velocities
+agree: the ball joint's is in the body frame.
 
 Pinocchio's MJCF reader places hinge joints at their body's origin and ignores a joint ``pos``
-offset (the 2F-85's followers have one), so the full models agree only with the fingers open;
-the base block, which is all the controllers use, agrees exactly there (see the tests).
+offset (the 2F-85's followers have one), so the full models agree only with the fingers open; the
+base block, which is all the controllers use, agrees exactly there (see the tests).
 """
 
 from __future__ import annotations

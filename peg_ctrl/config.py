@@ -158,7 +158,7 @@ def to_dict(cfg: Any) -> Any:
     """Plain data (dicts, lists, numbers, strings) for a dataclass config, for saving as JSON/YAML."""
     if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
         fields = {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg) if f.init}
-        return {"name": cfg.name, **fields} if is_selectable(type(cfg)) else fields
+        return {"name": cfg.name, **fields} if is_selectable(type(cfg)) else fields  # type: ignore[attr-defined]
     if isinstance(cfg, (list, tuple)):
         return [to_dict(v) for v in cfg]
     if isinstance(cfg, dict):

@@ -170,7 +170,7 @@ class PickAndPlaceTask:
     """Turns observations into gripper targets, phase by phase; evaluates the insertion."""
 
     name = "pick_and_place"
-    phases = PHASES
+    phases: tuple[str, ...] = PHASES
 
     def __init__(
         self,

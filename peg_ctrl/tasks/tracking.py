@@ -29,7 +29,7 @@ class TrackingTask:
     """
 
     name = "track"
-    phases = ("track",)
+    phases: tuple[str, ...] = ("track",)
     grasped = False
 
     def __init__(

@@ -30,7 +30,7 @@ class TeleopTask:
     """
 
     name = "teleop"
-    phases = ("teleop",)
+    phases: tuple[str, ...] = ("teleop",)
     grasped = False  # the operator may let go at any time: no slip monitoring
 
     def __init__(
