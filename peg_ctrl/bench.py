@@ -24,6 +24,7 @@ from peg_ctrl.controllers import make_controller
 from peg_ctrl.loop import Loop, StepInfo
 from peg_ctrl.scene import SceneConfig, build_model
 from peg_ctrl.tasks.tracking import TrackingTask
+from peg_ctrl.timing import control_decimation
 
 __all__ = ["bench_controller", "run_benchmarks"]
 
@@ -79,7 +80,7 @@ def bench_controller(
     model = build_model()
     params = {} if control_dt is None else {"control_dt": control_dt}
     controller = make_controller(name, model, **params)
-    decimation = round(controller.control_dt / model.opt.timestep)
+    decimation = control_decimation(controller.control_dt, model.opt.timestep)
     targets = _targets(n_steps // decimation)
     log = _ControlLog()
     closed = Loop(

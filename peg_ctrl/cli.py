@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -37,7 +37,6 @@ from peg_ctrl.io import atomic_write_text, prepare_output_dir, prepare_output_fi
 
 __all__ = ["main"]
 
-_PENDING: dict[str, str] = {}
 
 EXIT_FAILED = 1
 EXIT_USER_ERROR = 2
@@ -322,13 +321,6 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pending(name: str) -> Callable[[argparse.Namespace], int]:
-    def run(args: argparse.Namespace) -> int:
-        raise ConfigError(f"'{name}' is not available in this version yet")
-
-    return run
-
-
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="peg-sim", description="Peg-in-hole simulation and controller research in MuJoCo.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -415,10 +407,6 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")
     p.add_argument("dir", help="a sweep's output directory")
     p.set_defaults(func=_cmd_plot)
-
-    for name, text in _PENDING.items():
-        p = sub.add_parser(name, help=f"{text} (coming in a later version)")
-        p.set_defaults(func=_pending(name))
     return parser
 
 

@@ -112,6 +112,10 @@ class Loop:
         """Control period [s]."""
         return self.decimation * float(self.model.opt.timestep)
 
+    def state(self) -> ControlState:
+        """The gripper's state now, noise-free."""
+        return self.reader.control_state(self.data)
+
     def reset(self, rng: np.random.Generator) -> Observation:
         """Home keyframe, the task's initial state from ``rng``, one ``mj_forward``; resets the
         controller, monitors and task. Returns the first (noise-free) observation."""

@@ -59,15 +59,12 @@ def step_record(loop: Loop, info: StepInfo) -> dict[str, Any]:
 
 
 class StepLogRecorder:
-    """``log.jsonl``: a step record every ``interval`` physics steps (with ``extra()`` fields
-    merged in), and a phase record whenever a phase of the task ends."""
+    """``log.jsonl``: a step record every ``interval`` physics steps, and a phase record whenever
+    a phase of the task ends."""
 
-    def __init__(
-        self, logger: EpisodeLogger, interval: int, *, extra: Callable[[], dict[str, Any]] | None = None
-    ) -> None:
+    def __init__(self, logger: EpisodeLogger, interval: int) -> None:
         self.logger = logger
         self.interval = interval
-        self.extra = extra
         self._next = interval
         self._phases_logged = 0
 
@@ -75,10 +72,7 @@ class StepLogRecorder:
         self.log_closed_phases(loop)
         if info.step >= self._next:
             self._next += self.interval
-            entry = step_record(loop, info)
-            if self.extra is not None:
-                entry.update(self.extra())
-            self.logger.record(entry)
+            self.logger.record(step_record(loop, info))
 
     def flush(self, loop: Loop) -> None:
         """At the end: log every phase record not yet logged, closed or not."""

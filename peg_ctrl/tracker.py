@@ -62,4 +62,4 @@ class Tracker:
         return self.state()
 
     def state(self) -> ControlState:
-        return self.loop.reader.control_state(self.data)
+        return self.loop.state()

@@ -15,7 +15,7 @@ import numpy as np
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.state import ControlState, PegObservation
 
-__all__ = ["Observation", "Evaluation", "Task", "PhaseRecord"]
+__all__ = ["Observation", "Evaluation", "Task", "PhaseRecord", "close_open_record"]
 
 
 class Observation(NamedTuple):
@@ -55,6 +55,13 @@ class PhaseRecord:
 
     def to_dict(self) -> dict[str, Any]:
         return {"phase": self.phase, "t_start": self.t_start, "t_end": self.t_end, "outcome": self.outcome}
+
+
+def close_open_record(records: list[PhaseRecord], t: float, outcome: str) -> None:
+    """End the last record at ``t`` [s] if it is still open; an outcome set earlier is kept."""
+    if records and records[-1].t_end is None:
+        records[-1].t_end = t
+        records[-1].outcome = records[-1].outcome or outcome
 
 
 class Task(Protocol):

@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.planners.base import Trajectory
-from peg_ctrl.tasks.base import Observation, PhaseRecord
+from peg_ctrl.tasks.base import Observation, PhaseRecord, close_open_record
 
 __all__ = ["DONE", "Motion", "Timeout", "PhaseSpec", "PhaseMachine", "TrajectorySequence"]
 
@@ -102,9 +102,7 @@ class PhaseMachine:
 
     def close_record(self, t: float, outcome: str) -> None:
         """End the open record at ``t``; an outcome set earlier is kept."""
-        if self.records and self.records[-1].t_end is None:
-            self.records[-1].t_end = t
-            self.records[-1].outcome = self.records[-1].outcome or outcome
+        close_open_record(self.records, t, outcome)
 
     def update(self, obs: Observation) -> GripperTarget:
         """Advance the phase if its guard holds or its time is up; the target for ``obs.t``."""

@@ -391,8 +391,8 @@ class PickAndPlaceTask:
 
     def _grasp_waited(self, obs: Observation) -> str | None:
         assert self.machine.motion is not None
-        waited = self.machine.elapsed(obs.t) > self.machine.motion.duration + self.cfg.grasp_time
-        return "ok" if waited else None
+        wait = Timeout(self.cfg.grasp_time, after_motion=True)
+        return "ok" if wait.expired(self.machine.elapsed(obs.t), self.machine.motion.duration) else None
 
     def _check_grasp(self, obs: Observation) -> None:
         """A jaw that closed as far as commanded closed on nothing."""

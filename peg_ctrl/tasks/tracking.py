@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, close_open_record
 
 __all__ = ["TrackingTask"]
 
@@ -74,6 +74,4 @@ class TrackingTask:
         return _RUNNING
 
     def finish(self, t: float, outcome: str) -> None:
-        if self.records and self.records[-1].t_end is None:
-            self.records[-1].t_end = t
-            self.records[-1].outcome = outcome
+        close_open_record(self.records, t, outcome)

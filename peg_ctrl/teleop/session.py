@@ -24,7 +24,7 @@ from peg_ctrl.recorders import TraceRecorder, step_record
 from peg_ctrl.scene import HOME_KEY, SceneConfig
 from peg_ctrl.state import ControlState, PegObservation, StateReader
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
-from peg_ctrl.teleop.task import TeleopTask
+from peg_ctrl.teleop.task import TeleopTask, crossed
 from peg_ctrl.timing import control_decimation
 
 __all__ = ["TeleopSession"]
@@ -75,6 +75,7 @@ class TeleopSession:
         self.attempt = 1
         self.finished = False
         self.end_reason = ""
+        self._inserted_logged = False  # the "inserted" event of this attempt is in the log
         self.summary: dict[str, Any] = {}
         self.wall0 = time.perf_counter()
         self.loop.reset(np.random.default_rng(seed))
@@ -93,7 +94,7 @@ class TeleopSession:
         return self.task.inserted
 
     def state(self) -> ControlState:
-        return self.loop.reader.control_state(self.data)
+        return self.loop.state()
 
     def peg(self) -> PegObservation:
         assert self.loop.peg is not None
@@ -132,15 +133,13 @@ class TeleopSession:
     def record(self, loop: Loop, info: StepInfo) -> None:
         cfg = self.cfg
         before = self.step_count - loop.decimation
-        if self.step_count // cfg.log_every != before // cfg.log_every:
+        if crossed(before, self.step_count, cfg.log_every):
             self.logger.record({**_teleop_step(loop, info), "step": self.step_count, **self._log_extra()})
-        if self.step_count // cfg.save_every != before // cfg.save_every:
+        if crossed(before, self.step_count, cfg.save_every):
             self.logger.record({"event": "save", "step": self.step_count})
         if self.task.inserted and not self._inserted_logged:
             self._inserted_logged = True
             self.logger.record({"event": "inserted", "step": self.step_count, "t": round(info.t, 6)})
-
-    _inserted_logged = False
 
     def _log_extra(self) -> dict[str, Any]:
         m = self.mapper

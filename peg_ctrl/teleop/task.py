@@ -8,13 +8,18 @@ import numpy as np
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.monitors import InsertionMeasure, InsertionMonitor, SettledCriterion
 from peg_ctrl.scene import SceneConfig
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, close_open_record
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, initial_qpos
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
 
-__all__ = ["TeleopTask"]
+__all__ = ["TeleopTask", "crossed"]
 
 _RUNNING = Evaluation(False, False, "", "", None)
+
+
+def crossed(before: int, now: int, every: int) -> bool:
+    """Whether a step count going from ``before`` to ``now`` passed a multiple of ``every``."""
+    return now // every != before // every
 
 
 class TeleopTask:
@@ -81,13 +86,10 @@ class TeleopTask:
     def evaluate(self, obs: Observation) -> Evaluation:
         before = self.step_count
         self.step_count += self.decimation
-        every = self.cfg.check_every
-        if self.step_count // every != before // every:
+        if crossed(before, self.step_count, self.cfg.check_every):
             self.last_check = self.insertion.measure(obs.peg)
             self.inserted = self.inserted or self.insertion.criterion(self.last_check)
         return _RUNNING
 
     def finish(self, t: float, outcome: str) -> None:
-        if self.records and self.records[-1].t_end is None:
-            self.records[-1].t_end = t
-            self.records[-1].outcome = outcome
+        close_open_record(self.records, t, outcome)
