@@ -13,6 +13,7 @@ its field (``controllers[1].kp_pos: ...``). Example::
     randomization: {enabled: true, peg_xy: 0.015, peg_yaw: 0.2}
     domain: {peg_mass_scale: [0.8, 1.2], friction_scale: [0.8, 1.2], gain_scale: [0.9, 1.1]}
     task: {force_guarded_insert: false}
+    physics: {profile: precision}   # seed (default) or precision, see docs/physics.md
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from peg_ctrl.episode import (
     RandomizationConfig,
     episode_config_from_mapping,
 )
+from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.planners import PLANNERS
 from peg_ctrl.scene import SceneConfig
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig
@@ -44,13 +46,14 @@ class ExperimentConfig:
     name: str
     controllers: tuple[ControllerConfig, ...]
     planners: tuple[str, ...] = ("ruckig",)
-    clearances: tuple[float, ...] = (0.001,)  # radial hole clearance [m]
+    clearances: tuple[float, ...] = (0.001,)  # radial hole clearance [m]; negative: interference
     seeds: tuple[int, ...] = tuple(range(20))
-    max_steps: int = 20_000
+    max_steps: int | None = None  # physics steps; None: 20 s of sim whatever the profile's step
     randomization: RandomizationConfig = RandomizationConfig(enabled=True)
     domain: DomainConfig = DomainConfig()
     task: TaskConfig = TaskConfig()
     success: SuccessConfig = SuccessConfig()
+    physics: PhysicsConfig = PhysicsConfig()
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -65,17 +68,15 @@ class ExperimentConfig:
         if not self.clearances:
             raise ConfigError("clearances: at least one clearance is needed")
         for i, c in enumerate(self.clearances):
-            if not c >= 0:
-                raise ConfigError(f"clearances[{i}]: must be >= 0 m, got {c!r}")
             try:
-                AssetParams(clearance=c)
+                check_scene(self.physics.profile, AssetParams(clearance=c))
             except ValueError as exc:
                 raise ConfigError(f"clearances[{i}]: {exc}") from None
         if not self.seeds or any(s < 0 for s in self.seeds):
             raise ConfigError(f"seeds: need at least one seed, all >= 0, got {list(self.seeds)[:5]}")
         if len(set(self.seeds)) != len(self.seeds):
             raise ConfigError("seeds: repeated seeds")
-        if self.max_steps < 1:
+        if self.max_steps is not None and self.max_steps < 1:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
 
 
@@ -148,6 +149,7 @@ def expand(exp: ExperimentConfig) -> list[Job]:
                         randomization=exp.randomization,
                         domain=exp.domain,
                         scene=scene,
+                        physics=exp.physics,
                     )
                     blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
                     key = hashlib.sha256(blob).hexdigest()[:16]

@@ -70,7 +70,8 @@ def _warm_up(scene_data: dict[str, Any]) -> float:
     t0 = time.perf_counter()
     from peg_ctrl.episode import compiled_model, episode_config_from_mapping
 
-    compiled_model(episode_config_from_mapping(scene_data).scene)
+    cfg = episode_config_from_mapping(scene_data)
+    compiled_model(cfg.scene, cfg.physics.profile)
     return time.perf_counter() - t0
 
 

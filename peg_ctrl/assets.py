@@ -61,7 +61,7 @@ class AssetParams:
 
     peg_radius: float = 0.010
     peg_length: float = 0.100
-    clearance: float = 0.001  # radial clearance at the hole flats [m]
+    clearance: float = 0.001  # radial clearance at the hole flats [m]; negative: interference
     block_size: tuple[float, float, float] = (0.080, 0.080, 0.050)  # full extents x, y, z [m]
     n_parts: int = 10  # convex collision parts around the hole (and hole polygon sides)
     chamfer: float = 0.0  # depth and width of the 45-degree chamfer at the hole mouth [m]
@@ -71,8 +71,13 @@ class AssetParams:
     def __post_init__(self) -> None:
         _check_positive("peg_radius", self.peg_radius)
         _check_positive("peg_length", self.peg_length)
-        if not (np.isfinite(self.clearance) and self.clearance >= 0.0):
-            raise ValueError(f"clearance must be >= 0 m, got {self.clearance!r}")
+        # A negative clearance is an interference fit (validity studies); beyond a tenth of the
+        # radius it is no longer a fit at all.
+        if not (np.isfinite(self.clearance) and self.clearance > -0.1 * self.peg_radius):
+            raise ValueError(
+                f"clearance must be > -{0.1 * self.peg_radius:g} m (-0.1 x peg_radius; negative is "
+                f"an interference fit), got {self.clearance!r}"
+            )
         if not (np.isfinite(self.contact_margin) and self.contact_margin >= 0.0):
             raise ValueError(f"contact_margin must be >= 0 m, got {self.contact_margin!r}")
         if len(self.block_size) != 3:

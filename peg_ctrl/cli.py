@@ -23,7 +23,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from peg_ctrl.errors import (
     USER_ERRORS,
@@ -67,10 +67,20 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"peg-sim: error: {message} (see '{self.prog} --help')\n")
 
 
+def _episode_mapping(args: argparse.Namespace) -> dict[str, Any]:
+    """The episode config's plain data: ``--config`` file, then every ``--set KEY=VALUE``."""
+    from peg_ctrl.config import apply_overrides, read_mapping
+
+    data = read_mapping(Path(args.config)) if args.config else {}
+    return apply_overrides(data, args.set or [])
+
+
 def _cmd_model(args: argparse.Namespace) -> int:
+    from peg_ctrl.episode import episode_config_from_mapping
     from peg_ctrl.scene import export_scene
 
-    path = export_scene(prepare_output_dir(args.out))
+    cfg = episode_config_from_mapping(_episode_mapping(args))
+    path = export_scene(prepare_output_dir(args.out), cfg.scene, cfg.physics.profile)
     print(f"wrote {path} (open it with: python -m mujoco.viewer --mjcf={path})")
     return 0
 
@@ -158,11 +168,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from peg_ctrl.config import read_mapping
     from peg_ctrl.episode import episode_config_from_mapping, run_episode
 
-    data = read_mapping(Path(args.config)) if args.config else {}
-    # Command-line flags override the file.
+    data = _episode_mapping(args)
+    # The named flags override the file and --set.
     if args.controller is not None:
         ctrl = data.get("controller")
         if isinstance(ctrl, dict) and ctrl.get("name", args.controller) == args.controller:
@@ -297,10 +306,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
     path = _resolve_experiment(args.config)
     from peg_ctrl.batch import default_workers
-    from peg_ctrl.experiments.config import load_experiment
+    from peg_ctrl.config import apply_overrides, read_mapping
+    from peg_ctrl.experiments.config import experiment_from_mapping
     from peg_ctrl.experiments.runner import run_sweep
 
-    exp = load_experiment(path)
+    data = apply_overrides(read_mapping(path), args.set or [])
+    exp = experiment_from_mapping(data, default_name=path.stem)
     workers = args.workers or default_workers()
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
@@ -321,12 +332,24 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_set(p: argparse.ArgumentParser, what: str = "config") -> None:
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help=f"set a {what} field by dotted path, value parsed as YAML (repeatable), "
+        "e.g. --set physics.profile=precision --set scene.assets.clearance=5e-5",
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="peg-sim", description="Peg-in-hole simulation and controller research in MuJoCo.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("model", help="write the compiled scene as scene.xml plus meshes")
     p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--config", help="episode config file (.yaml, .toml or .json) whose scene to write")
+    _add_set(p)
     p.set_defaults(func=_cmd_model)
 
     p = sub.add_parser("calibrate", help="measure the jaw byte <-> pad separation map and save it")
@@ -362,11 +385,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", help="ruckig (default) or fixed_speed")
     p.add_argument("--seed", type=int, help="random seed for the initial conditions (default 0)")
     p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose from the seed")
-    p.add_argument("--max-steps", type=int, help="physics step limit (default 20000)")
+    p.add_argument("--max-steps", type=int, help="physics step limit (default: 20 s of simulated time, 20000 steps in the seed profile)")
     p.add_argument("--out", default="runs/episode", help="output directory (default runs/episode)")
     p.add_argument("--video", action="store_true", help="also render DIR/episode.mp4 offscreen")
     p.add_argument("--viewer", action="store_true", help="show the episode in the MuJoCo viewer instead")
     p.add_argument("--config", help="episode config file (.yaml, .toml or .json)")
+    _add_set(p)
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser(
@@ -402,6 +426,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, help="worker processes (default: one per core)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--address", help="Ray cluster address (with --backend ray)")
+    _add_set(p, "experiment")
     p.set_defaults(func=_cmd_sweep)
 
     p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")

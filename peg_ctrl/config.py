@@ -12,17 +12,19 @@ the concrete class. :func:`to_dict` writes the ``name`` back, so saved configs l
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
+import re
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar, Union
 
 from peg_ctrl.errors import ConfigError
 
-__all__ = ["ConfigError", "load", "load_file", "read_mapping", "to_dict", "is_selectable"]
+__all__ = ["ConfigError", "load", "load_file", "read_mapping", "to_dict", "is_selectable", "apply_overrides"]
 
 T = TypeVar("T")
 
@@ -64,6 +66,55 @@ def read_mapping(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"config file {str(path)!r} must hold a mapping at the top level")
     return data
+
+
+_FLOAT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)$")
+
+
+def parse_value(text: str) -> Any:
+    """A command-line value parsed as YAML, except that ``1e-5`` is a number (YAML 1.1 reads a
+    mantissa without a dot as a string)."""
+    import yaml
+
+    if _FLOAT.match(text.strip()):
+        return float(text)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"value {text!r} is not valid YAML: {' '.join(str(exc).split())}") from None
+
+
+def apply_overrides(data: dict[str, Any], assignments: Sequence[str]) -> dict[str, Any]:
+    """``data`` with each ``KEY=VALUE`` of ``assignments`` set (``--set`` on the command line).
+
+    KEY is a dotted path into the nested mapping (``physics.profile``, ``scene.assets.clearance``,
+    ``controller.kp_pos``); VALUE is parsed as YAML (``[1, 2]``, ``true``, ``1e-5``). Missing
+    levels are created; whether the path names a real field is checked when the result is
+    loaded, with the field's dotted path in the error. ``data`` itself is not changed.
+    """
+    result = copy.deepcopy(data)
+    for item in assignments:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not sep or not all(parts):
+            raise ConfigError(
+                f"--set {item!r}: expected KEY=VALUE with a dotted KEY, e.g. physics.profile=precision"
+            )
+        value = parse_value(raw)
+        node = result
+        for depth, part in enumerate(parts[:-1]):
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            elif isinstance(child, str):  # a selectable chosen by bare name: controller: pd
+                child = node[part] = {"name": child}
+            elif not isinstance(child, dict):
+                where = ".".join(parts[: depth + 1])
+                raise ConfigError(f"--set {key}: {where} is {child!r}, not a mapping")
+            node = child
+        node[parts[-1]] = value
+    return result
 
 
 def load_file(cls: type[T], path: Path) -> T:

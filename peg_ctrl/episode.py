@@ -34,6 +34,7 @@ from peg_ctrl.io import atomic_write_text
 from peg_ctrl.jaw import load_default
 from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
 from peg_ctrl.monitors import ContactMonitor, GraspMonitor
+from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
 from peg_ctrl.recorders import CallbackRecorder, StepLogRecorder, TraceRecorder, VideoRecorder
 from peg_ctrl.scene import SceneConfig, build_model
@@ -54,6 +55,9 @@ __all__ = [
     "prepare_model",
     "build_loop",
 ]
+
+
+EPISODE_TIME = 20.0  # default episode length [s of sim]: SPEC's 20,000 steps of 1 ms
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +106,7 @@ class EpisodeConfig:
     controller: ControllerConfig = PDConfig()
     planner: str = "ruckig"
     seed: int = 0
-    max_steps: int = 20_000  # physics steps (SPEC: 20,000)
+    max_steps: int | None = None  # physics steps; None: EPISODE_TIME of sim (SPEC: 20,000 at 1 ms)
     limits: MotionLimits = MotionLimits()
     task: TaskConfig = TaskConfig()
     success: SuccessConfig = SuccessConfig()
@@ -110,14 +114,21 @@ class EpisodeConfig:
     domain: DomainConfig = DomainConfig()
     log: LogConfig = LogConfig()
     scene: SceneConfig = SceneConfig()
+    physics: PhysicsConfig = PhysicsConfig()
 
     def __post_init__(self) -> None:
+        check_scene(self.physics.profile, self.scene.assets)
         if self.planner not in PLANNERS:
             raise ConfigError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
-        if self.max_steps < 1:
+        if self.max_steps is not None and self.max_steps < 1:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
+
+
+    def step_limit(self, timestep: float) -> int:
+        """Physics steps the episode may take: ``max_steps``, else :data:`EPISODE_TIME` worth."""
+        return self.max_steps if self.max_steps is not None else round(EPISODE_TIME / timestep)
 
 
 def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
@@ -173,9 +184,9 @@ class EpisodeResult:
 
 
 @functools.lru_cache(maxsize=8)
-def compiled_model(scene: SceneConfig) -> mujoco.MjModel:
-    """One compiled model per scene per process (sweep workers reuse it across episodes)."""
-    return build_model(scene)
+def compiled_model(scene: SceneConfig, physics: str = "seed") -> mujoco.MjModel:
+    """One compiled model per scene and physics profile per process (sweep workers reuse it)."""
+    return build_model(scene, physics)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -199,13 +210,14 @@ def domain_draw(seed: int, domain: DomainConfig) -> DomainDraw:
 
 def prepare_model(cfg: EpisodeConfig, draw: DomainDraw) -> mujoco.MjModel:
     """A private copy of the scene's model with the domain draw applied."""
-    model = copy.copy(compiled_model(cfg.scene))
+    model = copy.copy(compiled_model(cfg.scene, cfg.physics.profile))
     peg = model.body("peg").id
     model.body_mass[peg] *= draw.peg_mass_scale
     model.body_inertia[peg] *= draw.peg_mass_scale
     for g in range(model.ngeom):
         if model.geom_bodyid[g] in (peg, model.body("block").id):
             model.geom_friction[g, 0] *= draw.friction_scale
+    model.pair_friction[:, :2] *= draw.friction_scale  # explicit peg-block pairs (precision)
     mujoco.mj_setConst(model, mujoco.MjData(model))
     return model
 
@@ -273,7 +285,7 @@ def run_episode(
     loop.recorders = recorders
     loop.reset(np.random.default_rng(cfg.seed))
     wall0 = time.perf_counter()
-    outcome = loop.run(cfg.max_steps)
+    outcome = loop.run(cfg.step_limit(loop.model.opt.timestep))
     wall = time.perf_counter() - wall0
     steps_log.flush(loop)
     result = _result(cfg, loop, outcome, wall, logger)

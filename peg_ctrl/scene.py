@@ -30,6 +30,7 @@ import numpy as np
 
 from peg_ctrl.assets import AssetParams, ensure_assets, part_name
 from peg_ctrl.menagerie import gripper_xml
+from peg_ctrl.physics import SEED, PhysicsProfile, profile
 
 __all__ = [
     "SceneConfig",
@@ -105,14 +106,9 @@ class SceneConfig:
 PEG_LYING_QUAT = (np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0)
 
 
-def _set_physics_options(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+def _set_physics_options(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile) -> None:
     opt = spec.option
-    opt.timestep = 0.001
-    opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
-    opt.solver = mujoco.mjtSolver.mjSOL_CG
-    opt.noslip_iterations = 20
-    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    opt.impratio = 10.0
+    physics.apply_options(opt)
     opt.o_solref = [0.005, 0.9]
     opt.o_solimp = [0.9, 0.9, 0.01, 0.5, 2.0]
     if cfg.contact_override:
@@ -148,7 +144,10 @@ def _add_table(spec: mujoco.MjSpec) -> None:
     table.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
 
 
-def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> None:
+def _add_block(
+    spec: mujoco.MjSpec, cfg: SceneConfig, assets: AssetParams, files: dict[str, Path]
+) -> list[str]:
+    """The block and its collision parts; returns the parts' geom names."""
     _add_mesh(spec, "block_visual", files["block_visual"])
     block = spec.worldbody.add_body()
     block.name = "block"
@@ -162,8 +161,10 @@ def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) ->
     visual.group = 2
     visual.density = 0.0
     visual.rgba = [0.55, 0.42, 0.30, 1.0]
-    for i in range(cfg.assets.n_parts):
+    parts = []
+    for i in range(assets.n_parts):
         name = part_name(i)
+        parts.append(name)
         _add_mesh(spec, name, files[name])
         geom = block.add_geom()
         geom.name = name
@@ -175,7 +176,7 @@ def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) ->
         geom.condim = 6
         # Contacts turn active within the margin; the hole is widened by the same amount
         # (AssetParams.contact_margin) so the effective clearance is the stated one.
-        geom.margin = cfg.assets.contact_margin
+        geom.margin = assets.contact_margin
         geom.solref = [0.01, 1.0]
         geom.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
         geom.rgba = [0.55, 0.42, 0.30, 0.4]
@@ -184,10 +185,10 @@ def _add_block(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) ->
     site.pos = [0.0, 0.0, 0.5 * cfg.assets.block_size[2]]
     site.size = [0.002, 0.002, 0.002]
     site.group = 5
+    return parts
 
 
-def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> None:
-    _add_mesh(spec, "peg", files["peg"])
+def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile, files: dict[str, Path]) -> None:
     peg = spec.worldbody.add_body()
     peg.name = "peg"
     peg.pos = list(cfg.peg_rest_pos)
@@ -196,8 +197,13 @@ def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> N
     joint.name = "peg_free"
     geom = peg.add_geom()
     geom.name = "peg"
-    geom.type = mujoco.mjtGeom.mjGEOM_MESH
-    geom.meshname = "peg"
+    if physics.peg_geom == "cylinder":
+        geom.type = mujoco.mjtGeom.mjGEOM_CYLINDER
+        geom.size = [cfg.assets.peg_radius, 0.5 * cfg.assets.peg_length, 0.0]
+    else:
+        _add_mesh(spec, "peg", files["peg"])
+        geom.type = mujoco.mjtGeom.mjGEOM_MESH
+        geom.meshname = "peg"
     geom.density = cfg.peg_density
     geom.friction = list(cfg.peg_friction)
     geom.condim = 6
@@ -211,6 +217,25 @@ def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, files: dict[str, Path]) -> N
         site.pos = [0.0, 0.0, z]
         site.size = [0.002, 0.002, 0.002]
         site.group = 5
+
+
+def _add_peg_block_pairs(spec: mujoco.MjSpec, physics: PhysicsProfile, parts: list[str]) -> None:
+    """Explicit peg-part contact pairs with the profile's parameters (instead of mixing the
+    peg's and the block's per-geom values, which also govern the grasp)."""
+    c = physics.pair
+    if c is None:
+        return
+    exclude = spec.add_exclude()
+    exclude.bodyname1, exclude.bodyname2 = "peg", "block"
+    for part in parts:
+        pair = spec.add_pair()
+        pair.name = f"peg-{part}"
+        pair.geomname1, pair.geomname2 = "peg", part
+        pair.condim = c.condim
+        pair.friction = list(c.friction)
+        pair.solref = list(c.solref)
+        pair.solimp = list(c.solimp)
+        pair.margin = c.margin
 
 
 def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
@@ -249,6 +274,9 @@ def _add_gripper(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     ft.group = 5
     frame = mount.add_frame()
     gripper = mujoco.MjSpec.from_file(str(gripper_xml()))
+    # The scene's solver options govern; align the child's so attaching does not warn.
+    gripper.option.impratio = spec.option.impratio
+    gripper.option.cone = spec.option.cone
     meshdir = Path(gripper.modelfiledir) / gripper.meshdir
     for mesh in gripper.meshes:
         mesh.file = str((meshdir / mesh.file).resolve())
@@ -384,19 +412,23 @@ def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel, cfg: SceneConfig) 
     key.ctrl = list(ctrl)
 
 
-def build_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
-    """The scene as an editable ``MjSpec`` (with a ``home`` keyframe)."""
+def build_spec(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED) -> mujoco.MjSpec:
+    """The scene as an editable ``MjSpec`` (with a ``home`` keyframe), built by the physics
+    profile ``physics`` (see :mod:`peg_ctrl.physics`)."""
     cfg = cfg or SceneConfig()
-    files = ensure_assets(cfg.assets)
+    physics = profile(physics)
+    assets = physics.assets(cfg.assets)
+    files = ensure_assets(assets)
     spec = mujoco.MjSpec()
     spec.modelname = "peg_in_hole"
     spec.compiler.degree = False
     spec.visual.global_.offwidth = 1280
     spec.visual.global_.offheight = 720
-    _set_physics_options(spec, cfg)
+    _set_physics_options(spec, cfg, physics)
     _add_table(spec)
-    _add_block(spec, cfg, files)
-    _add_peg(spec, cfg, files)
+    parts = _add_block(spec, cfg, assets, files)
+    _add_peg(spec, cfg, physics, files)
+    _add_peg_block_pairs(spec, physics, parts)
     _add_gripper(spec, cfg)
     _add_cameras_and_lights(spec, cfg)
     _add_contact_sensors(spec)
@@ -406,9 +438,9 @@ def build_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
     return spec
 
 
-def build_model(cfg: SceneConfig | None = None) -> mujoco.MjModel:
+def build_model(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED) -> mujoco.MjModel:
     """Compile the scene. The ``home`` keyframe holds the initial state."""
-    return build_spec(cfg).compile()
+    return build_spec(cfg, physics).compile()
 
 
 def build_robot_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
@@ -418,7 +450,7 @@ def build_robot_spec(cfg: SceneConfig | None = None) -> mujoco.MjSpec:
     spec = mujoco.MjSpec()
     spec.modelname = "peg_ctrl_robot"
     spec.compiler.degree = False
-    _set_physics_options(spec, cfg)
+    _set_physics_options(spec, cfg, SEED)
     _add_gripper(spec, cfg)
     return spec
 
@@ -463,14 +495,16 @@ def export_robot(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
     return path
 
 
-def export_scene(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
+def export_scene(
+    out_dir: Path, cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED
+) -> Path:
     """Write ``out_dir/scene.xml`` plus its meshes under ``out_dir/meshes``.
 
     The result loads with plain ``mujoco.MjModel.from_xml_path`` and opens in MuJoCo's own viewer.
     """
     import xml.etree.ElementTree as ET
 
-    spec = build_spec(cfg)
+    spec = build_spec(cfg, physics)
     out_dir = Path(out_dir)
     mesh_dir = out_dir / "meshes"
     mesh_dir.mkdir(parents=True, exist_ok=True)

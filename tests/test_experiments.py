@@ -45,7 +45,7 @@ def test_shipped_experiments_load() -> None:
     "text, message",
     [
         ("controllers: [{name: lqg}]", "controllers[0]: unknown controller 'lqg'; known: admittance, diffik"),
-        ("controllers: [pd]\nclearances: [-0.001]", "clearances[0]: must be >= 0 m"),
+        ("controllers: [pd]\nclearances: [-0.002]", "clearances[0]: clearance must be > -0.001 m"),
         ("clearances: [0.001]", "controllers: missing field"),
         ("controllers: [pd]\nseeds: many", "seeds: expected a list"),
         ("controllers: [{name: pd, kp_pos: fast}]", "controllers[0].kp_pos: expected a number"),

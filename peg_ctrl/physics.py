@@ -1,0 +1,182 @@
+"""Physics profiles: the solver options and the peg-block contact model, chosen by name.
+
+``seed``
+    SPEC §3 exactly: 1 ms RK4, CG with 20 noslip iterations, per-geom ``solref``/``solimp``, a
+    1 mm contact margin on the block (the hole is widened by it), a 10-sided hole and a 32-sided
+    mesh peg. Every bar measured before the profiles existed holds with it.
+
+``precision``
+    For studies in which clearance, chamfer and tilt must act as they do on real parts
+    (docs/physics.md has the measurements behind each value):
+
+    - the peg is a primitive cylinder, exact to the collider's tolerance;
+    - the hole is a polygon with as many sides as it takes to stay within
+      ``hole_roundness`` (10 µm) of the nominal radius: flats at the nominal radius, corners at
+      most 10 µm outside it;
+    - peg-block contacts have no margin (they act when the surfaces meet), a time constant of
+      two physics steps and impedance 0.99..0.999, so 10 N of steady contact penetrates a few µm;
+    - the peg-block pair uses ``condim`` 3: sliding friction only. Torsional and rolling friction
+      model a contact patch, which between rigid metal parts is microns wide; the seed's 0.1 m
+      torsional coefficient (a patch ~20 cm across) resists the peg straightening in the hole;
+    - the Newton solver runs to convergence (tolerance 1e-10) at a 0.5 ms step with the
+      ``implicitfast`` integrator; noslip keeps the grasp.
+
+A profile changes the compiled model only: tasks, controllers and the loop do not know which
+one is in use (the control period must be a whole number of physics steps, which both meet at
+1 kHz).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import mujoco
+
+from peg_ctrl.assets import AssetParams
+from peg_ctrl.errors import ConfigError, UnknownComponent
+
+__all__ = [
+    "PairContact",
+    "PhysicsProfile",
+    "PhysicsConfig",
+    "PROFILES",
+    "SEED",
+    "PRECISION",
+    "profile",
+    "parts_for_roundness",
+    "check_scene",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class PairContact:
+    """Contact parameters of the peg against the block, one explicit MuJoCo ``pair`` per part."""
+
+    condim: int = 3
+    friction: tuple[float, float, float, float, float] = (0.9, 0.9, 0.0, 0.0, 0.0)
+    solref: tuple[float, float] = (0.001, 1.0)  # [s, damping ratio]
+    solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 1e-4, 0.5, 2.0)
+    margin: float = 0.0  # [m]
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsProfile:
+    """Solver options and the peg-block contact model. ``pair=None`` keeps the per-geom values."""
+
+    name: str
+    timestep: float  # [s]
+    integrator: str  # mjtIntegrator name without prefix: "RK4", "IMPLICITFAST", "EULER"
+    solver: str  # "CG" or "NEWTON"
+    iterations: int
+    tolerance: float
+    ls_iterations: int
+    noslip_iterations: int
+    impratio: float
+    peg_geom: str  # "mesh" (the 32-sided prism of the seed) or "cylinder" (primitive)
+    hole_roundness: float | None  # max corner deviation from the nominal radius [m]; None: n_parts
+    contact_margin: float | None  # block geoms' margin, added to the hole [m]; None: the assets'
+    pair: PairContact | None = None
+    multiccd: bool = False
+
+    def assets(self, params: AssetParams) -> AssetParams:
+        """The geometry this profile builds for the requested ``params``: its margin, its hole."""
+        if self.contact_margin is not None:
+            params = dataclasses.replace(params, contact_margin=self.contact_margin)
+        if self.hole_roundness is None:
+            return params
+        n = parts_for_roundness(params.hole_inradius, self.hole_roundness)
+        return dataclasses.replace(params, n_parts=n)
+
+    def apply_options(self, opt: mujoco.MjOption | mujoco.MjsOption) -> None:  # type: ignore[name-defined]
+        opt.timestep = self.timestep
+        opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator}")
+        opt.solver = getattr(mujoco.mjtSolver, f"mjSOL_{self.solver}")
+        opt.iterations = self.iterations
+        opt.tolerance = self.tolerance
+        opt.ls_iterations = self.ls_iterations
+        opt.noslip_iterations = self.noslip_iterations
+        opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        opt.impratio = self.impratio
+        if self.multiccd:
+            opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
+
+
+def parts_for_roundness(inradius: float, tolerance: float) -> int:
+    """Fewest polygon sides whose corners lie within ``tolerance`` [m] outside the ``inradius``."""
+    if not (math.isfinite(tolerance) and tolerance > 0.0):
+        raise ConfigError(f"hole roundness tolerance must be > 0 m, got {tolerance!r}")
+    n = math.ceil(math.pi / math.acos(inradius / (inradius + tolerance)))
+    while inradius / math.cos(math.pi / n) - inradius > tolerance:  # guard the rounding
+        n += 1
+    return max(n, 4)
+
+
+SEED = PhysicsProfile(
+    name="seed",
+    timestep=0.001,
+    integrator="RK4",
+    solver="CG",
+    iterations=100,
+    tolerance=1e-8,
+    ls_iterations=50,
+    noslip_iterations=20,
+    impratio=10.0,
+    peg_geom="mesh",
+    hole_roundness=None,
+    contact_margin=None,
+)
+
+PRECISION = PhysicsProfile(
+    name="precision",
+    timestep=0.0005,
+    integrator="IMPLICITFAST",
+    solver="NEWTON",
+    iterations=100,
+    tolerance=1e-10,
+    ls_iterations=50,
+    noslip_iterations=0,
+    impratio=100.0,
+    peg_geom="cylinder",
+    hole_roundness=10e-6,
+    contact_margin=0.0,
+    pair=PairContact(),
+)
+
+PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION)}
+
+
+def profile(name_or_profile: str | PhysicsProfile) -> PhysicsProfile:
+    """The profile called ``name`` (or the profile itself); an unknown name lists the known."""
+    if isinstance(name_or_profile, PhysicsProfile):
+        return name_or_profile
+    try:
+        return PROFILES[name_or_profile]
+    except KeyError:
+        raise UnknownComponent("physics profile", name_or_profile, PROFILES, where="physics.profile") from None
+
+
+def check_scene(name: str | PhysicsProfile, assets: AssetParams) -> None:
+    """Reject asset fields that the profile sets itself, rather than ignore them silently."""
+    prof = profile(name)
+    default = AssetParams()
+    if prof.contact_margin is not None and assets.contact_margin != default.contact_margin:
+        raise ConfigError(
+            f"scene.assets.contact_margin: set by physics.profile={prof.name} "
+            f"({prof.contact_margin} m); leave it out or use physics.profile=seed"
+        )
+    if prof.hole_roundness is not None and assets.n_parts != default.n_parts:
+        raise ConfigError(
+            f"scene.assets.n_parts: set by physics.profile={prof.name} (round to "
+            f"{prof.hole_roundness * 1e6:g} um); leave it out or use physics.profile=seed"
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsConfig:
+    """``physics.profile``: which :class:`PhysicsProfile` builds the scene."""
+
+    profile: str = "seed"
+
+    def __post_init__(self) -> None:
+        profile(self.profile)

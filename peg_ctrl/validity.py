@@ -1,0 +1,317 @@
+"""Physical validity experiments: a held peg pushed into the hole with a constant force.
+
+These experiments check the contact model, not a controller. The peg is held upright in the
+closed gripper (as after the pick-and-place task's turn) with its lower end ``start_height``
+above the hole mouth, offset by ``lateral_error`` along world X and tilted by ``tilt`` about
+world Y (about its lower end). The gripper base then pushes down with ``force`` newtons on top
+of gravity compensation while its orientation is held by a stiff joint-space PD and its
+lateral motion is *free* (zero lateral force, only the slides' joint damping): an ideally
+compliant hand, so whatever the peg does laterally is the contact's doing.
+
+Measured per run: final and deepest insertion depth, peak and steady peg-block force, steady
+penetration of the peg into the block (true geometric overlap, the margin subtracted), the
+peg's slip in the pads during the push and the solver's iterations.
+
+``peg-sim validity`` runs the standard battery (clearance curve, chamfer capture, tilt wedging,
+penetration) and writes a table and plots; the tests in ``tests/physics`` assert the bars.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from peg_ctrl.assets import AssetParams
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.jaw import load_default
+from peg_ctrl.physics import PhysicsProfile, profile
+from peg_ctrl.scene import (
+    BALL_ACTUATORS,
+    BALL_JOINT,
+    GRIPPER_PREFIX,
+    JAW_ACTUATOR,
+    PEG_LYING_QUAT,
+    SLIDE_ACTUATORS,
+    SLIDE_JOINTS,
+    SceneConfig,
+    build_model,
+)
+
+__all__ = ["PushCase", "PushResult", "held_push", "wedging_depth", "wedging_tilt"]
+
+GRASP_OFFSET = 0.010  # peg axis from the pinch point along the fingers, as the task grasps [m]
+_CLOSE_TIME = 0.6  # jaw closing with the peg held in place [s]
+_SETTLE_TIME = 0.3  # peg free in the closed jaw before the push [s]
+_STEADY_WINDOW = 0.2  # the last seconds of the push over which steady values are taken [s]
+_KP_ROT, _KD_ROT = 400.0, 5.0  # ball-joint hold [N m/rad], [N m s/rad] (on top of joint damping)
+_KP_POS, _KD_POS = 3000.0, 50.0  # slide hold before the push [N/m], [N s/m]
+_PUSH_SPEED = 0.03  # quasi-static descent speed [m/s]
+_KV_PUSH = 2000.0  # descent speed gain [N s/m]; saturates at the push force in contact
+
+
+@dataclasses.dataclass(frozen=True)
+class PushCase:
+    """One held push. Lengths in [m], angles in [rad], force in [N], time in [s]."""
+
+    clearance: float = 0.0001  # radial; negative is an interference fit
+    chamfer: float = 0.0
+    lateral_error: float = 0.0  # peg axis from the hole axis along +X at the start
+    tilt: float = 0.0  # about world Y, the lower end leading towards -X... (positive tilts +X top)
+    force: float = 10.0  # downward push on top of gravity compensation
+    duration: float = 2.0  # of the push (the descent runs at 30 mm/s)
+    start_height: float = 0.001  # peg lower end above the mouth at the start
+    grip_above_centre: float = 0.02  # pads this far above the peg's centre: the fingers clear
+    # the block top until the peg stands on the table (at the centre they touch it at 36 mm deep)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.force) and self.force > 0):
+            raise ConfigError(f"push force must be > 0 N, got {self.force!r}")
+        if not (math.isfinite(self.duration) and self.duration > 0):
+            raise ConfigError(f"push duration must be > 0 s, got {self.duration!r}")
+        if not (math.isfinite(self.tilt) and abs(self.tilt) < 0.5):
+            raise ConfigError(f"tilt must be within +-0.5 rad, got {self.tilt!r}")
+
+    def assets(self, base: AssetParams = AssetParams()) -> AssetParams:
+        return dataclasses.replace(base, clearance=self.clearance, chamfer=self.chamfer)
+
+
+@dataclasses.dataclass(frozen=True)
+class PushResult:
+    """What one held push measured. Lengths in [m], forces in [N]."""
+
+    case: PushCase
+    profile: str
+    depth: float  # peg lower end below the mouth at the end
+    max_depth: float
+    peak_force: float  # peg-block contact force, whole push
+    steady_force: float  # mean over the last _STEADY_WINDOW
+    penetration: float  # deepest true overlap over the last _STEADY_WINDOW (>= 0)
+    peak_penetration: float  # deepest true overlap over the whole push
+    slip: float  # peg displacement in the pad frame over the push
+    final_tilt: float  # peg axis from vertical at the end [rad]
+    max_solver_iterations: int
+    steps: int
+    wall_time_s: float
+    trace: NDArray[np.float64] | None = None  # (steps, 4): time [s], depth [m], force [N], overlap [m]
+
+    def inserted(self, depth: float = 0.04) -> bool:
+        return self.depth >= depth
+
+
+def wedging_depth(clearance: float, tilt: float, radius: float = 0.010) -> float:
+    """Deepest a rigid peg of ``radius`` tilted by ``tilt`` [rad] enters a hole of radius
+    ``radius + clearance`` before touching both walls (2-D, two-point contact): the axial
+    extent ``l`` at which ``l sin(tilt) + d cos(tilt) = D``."""
+    d, big_d = 2.0 * radius, 2.0 * (radius + clearance)
+    s = math.sin(abs(tilt))
+    if s == 0.0:
+        return math.inf
+    return max(0.0, (big_d - d * math.cos(tilt)) / s)
+
+
+def wedging_tilt(clearance: float, depth: float, radius: float = 0.010) -> float:
+    """The tilt [rad] at which :func:`wedging_depth` equals ``depth`` [m] (bisection)."""
+    lo, hi = 0.0, 0.5
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if wedging_depth(clearance, mid, radius) > depth:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def _quat_mul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    out = np.empty(4)
+    mujoco.mju_mulQuat(out, a, b)
+    return out
+
+
+def _rotate(q: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    out = np.empty(3)
+    mujoco.mju_rotVecQuat(out, v, q)
+    return out
+
+
+class _Rig:
+    """Indices and the hold controller of the pushing gripper."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.slide_qpos = [model.joint(j).qposadr[0] for j in SLIDE_JOINTS]
+        self.slide_dof = [model.joint(j).dofadr[0] for j in SLIDE_JOINTS]
+        self.ball_qpos = model.joint(BALL_JOINT).qposadr[0]
+        self.ball_dof = model.joint(BALL_JOINT).dofadr[0]
+        self.slide_act = [model.actuator(a).id for a in SLIDE_ACTUATORS]
+        self.ball_act = [model.actuator(a).id for a in BALL_ACTUATORS]
+        self.jaw_act = model.actuator(JAW_ACTUATOR).id
+        self.peg = model.body("peg").id
+        self.peg_qpos = model.joint("peg_free").qposadr[0]
+        self.peg_dof = model.joint("peg_free").dofadr[0]
+        self.pad = model.body(GRIPPER_PREFIX + "left_pad").id
+        block = model.body("block").id
+        self.block_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] == block}
+        self.peg_geom = model.geom("peg").id
+
+    def control(
+        self,
+        data: mujoco.MjData,
+        p_ref: NDArray[np.float64],
+        q_ref: NDArray[np.float64],
+        push: float | None,
+    ) -> None:
+        """Hold ``q_ref``; hold ``p_ref`` (``push`` None) or push down with ``push`` N, laterally free."""
+        bias = data.qfrc_bias
+        for k in range(3):
+            dof, act = self.slide_dof[k], self.slide_act[k]
+            if push is None:
+                err = p_ref[k] - data.qpos[self.slide_qpos[k]]
+                data.ctrl[act] = _KP_POS * err - _KD_POS * data.qvel[dof] + bias[dof]
+            elif k == 2:
+                # Down at up to _PUSH_SPEED, with at most ``push`` newtons: the force saturates
+                # in contact. The slide's own damping is cancelled so the force is the push.
+                down = -data.qvel[dof]
+                f = min(push, max(0.0, _KV_PUSH * (_PUSH_SPEED - down)))
+                data.ctrl[act] = bias[dof] - data.qfrc_passive[dof] - f
+            else:
+                data.ctrl[act] = bias[dof]
+        q = data.qpos[self.ball_qpos : self.ball_qpos + 4]
+        err3 = np.empty(3)
+        mujoco.mju_subQuat(err3, q_ref, q)
+        w = data.qvel[self.ball_dof : self.ball_dof + 3]
+        torque = _KP_ROT * err3 - _KD_ROT * w + bias[self.ball_dof : self.ball_dof + 3]
+        for k in range(3):
+            data.ctrl[self.ball_act[k]] = torque[k]
+
+    def peg_in_pad(self, data: mujoco.MjData) -> NDArray[np.float64]:
+        return data.xmat[self.pad].reshape(3, 3).T @ (data.xpos[self.peg] - data.xpos[self.pad])
+
+    def peg_block_contact(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple[float, float]:
+        """Net peg-block contact force magnitude [N] and the deepest true overlap [m] (>= 0)."""
+        total = np.zeros(3)
+        overlap = 0.0
+        f6 = np.empty(6)
+        for i in range(data.ncon):
+            c = data.contact[i]
+            g1, g2 = c.geom1, c.geom2
+            if not (
+                (g1 == self.peg_geom and g2 in self.block_geoms)
+                or (g2 == self.peg_geom and g1 in self.block_geoms)
+            ):
+                continue
+            if c.efc_address >= 0:
+                mujoco.mj_contactForce(model, data, i, f6)
+                total += c.frame.reshape(3, 3).T @ f6[:3]
+            overlap = max(overlap, -c.dist)
+        return float(np.linalg.norm(total)), overlap
+
+
+def _initial_state(
+    model: mujoco.MjModel, data: mujoco.MjData, rig: _Rig, scene: SceneConfig, case: PushCase
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gripper and peg poses for the case; returns the gripper's (position, orientation) target."""
+    q_turn = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])  # 90 deg about X
+    q_tilt = np.array([math.cos(case.tilt / 2), 0.0, math.sin(case.tilt / 2), 0.0])  # about Y
+    q_grip = _quat_mul(q_tilt, q_turn)
+    q_peg = _quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
+    half = 0.5 * scene.assets.peg_length
+    # The lower end: along the peg's local axis, whichever end points down.
+    axis = _rotate(q_peg, np.array([0.0, 0.0, 1.0]))
+    lower_local = -half if axis[2] > 0 else half
+    hx, hy = scene.hole_xy
+    top = scene.assets.block_size[2]
+    bottom = np.array([hx + case.lateral_error, hy, top + case.start_height])
+    peg_centre = bottom - _rotate(q_peg, np.array([0.0, 0.0, lower_local]))
+    up = axis if axis[2] > 0 else -axis
+    pinch = peg_centre + case.grip_above_centre * up - _rotate(q_grip, np.array([0.0, 0.0, -GRASP_OFFSET]))
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    data.qpos[rig.slide_qpos] = pinch
+    data.qpos[rig.ball_qpos : rig.ball_qpos + 4] = q_grip
+    data.qpos[rig.peg_qpos : rig.peg_qpos + 3] = peg_centre
+    data.qpos[rig.peg_qpos + 3 : rig.peg_qpos + 7] = q_peg
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(model, data)
+    return pinch, q_grip
+
+
+def held_push(
+    case: PushCase,
+    physics: str | PhysicsProfile = "precision",
+    *,
+    scene: SceneConfig | None = None,
+    model: mujoco.MjModel | None = None,
+    trace: bool = False,
+) -> PushResult:
+    """Grasp, then push ``case.force`` newtons down for ``case.duration`` seconds; measure.
+
+    ``model`` (compiled for this case's geometry and profile) may be passed to skip compiling.
+    """
+    prof = profile(physics)
+    base = scene or SceneConfig()
+    scene = dataclasses.replace(base, assets=case.assets(base.assets))
+    if model is None:
+        model = build_model(scene, prof)
+    data = mujoco.MjData(model)
+    rig = _Rig(model)
+    pinch, q_grip = _initial_state(model, data, rig, scene, case)
+    peg_pose = data.qpos[rig.peg_qpos : rig.peg_qpos + 7].copy()
+    dt = model.opt.timestep
+    data.ctrl[rig.jaw_act] = load_default().sep_to_byte(0.0)
+    started = time.perf_counter()
+    for _ in range(round(_CLOSE_TIME / dt)):  # close on a peg held in place
+        rig.control(data, pinch, q_grip, None)
+        mujoco.mj_step(model, data)
+        data.qpos[rig.peg_qpos : rig.peg_qpos + 7] = peg_pose
+        data.qvel[rig.peg_dof : rig.peg_dof + 6] = 0.0
+    for _ in range(round(_SETTLE_TIME / dt)):
+        rig.control(data, pinch, q_grip, None)
+        mujoco.mj_step(model, data)
+    ref = rig.peg_in_pad(data)
+
+    top = scene.assets.block_size[2]
+    lower = model.site("peg_bottom").id, model.site("peg_top").id
+    n_push = round(case.duration / dt)
+    n_steady = max(1, round(_STEADY_WINDOW / dt))
+    depth = max_depth = peak_force = peak_pen = slip = 0.0
+    steady_forces: list[float] = []
+    steady_pen = 0.0
+    max_iter = 0
+    rows = np.zeros((n_push, 4)) if trace else None
+    for step in range(n_push):
+        rig.control(data, pinch, q_grip, case.force)
+        mujoco.mj_step(model, data)
+        force, pen = rig.peg_block_contact(model, data)
+        z = min(data.site_xpos[lower[0], 2], data.site_xpos[lower[1], 2])
+        depth = top - z
+        max_depth = max(max_depth, depth)
+        peak_force = max(peak_force, force)
+        peak_pen = max(peak_pen, pen)
+        slip = max(slip, float(np.linalg.norm(rig.peg_in_pad(data) - ref)))
+        max_iter = max(max_iter, int(data.solver_niter[0]))
+        if rows is not None:
+            rows[step] = (step * dt, depth, force, pen)
+        if step >= n_push - n_steady:
+            steady_forces.append(force)
+            steady_pen = max(steady_pen, pen)
+    axis = data.xmat[rig.peg].reshape(3, 3)[:, 2]
+    return PushResult(
+        case=case,
+        profile=prof.name,
+        depth=float(depth),
+        max_depth=float(max_depth),
+        peak_force=float(peak_force),
+        steady_force=float(np.mean(steady_forces)),
+        penetration=float(steady_pen),
+        peak_penetration=float(peak_pen),
+        slip=slip,
+        final_tilt=float(math.acos(min(1.0, abs(axis[2])))),
+        max_solver_iterations=max_iter,
+        steps=n_push,
+        wall_time_s=time.perf_counter() - started,
+        trace=rows,
+    )
