@@ -322,6 +322,20 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_validity(args: argparse.Namespace) -> int:
+    from peg_ctrl.physics import profile
+    from peg_ctrl.validity_report import run_battery
+
+    profiles = args.profile or ["seed", "precision"]
+    for name in profiles:
+        profile(name)
+    if args.trials < 1:
+        raise ConfigError(f"--trials must be >= 1, got {args.trials}")
+    out = prepare_output_dir(args.out)
+    print(f"wrote {run_battery(out, profiles, trials=args.trials, seed=args.seed)}")
+    return 0
+
+
 def _cmd_plot(args: argparse.Namespace) -> int:
     from peg_ctrl.experiments.report import write_report
 
@@ -428,6 +442,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--address", help="Ray cluster address (with --backend ray)")
     _add_set(p, "experiment")
     p.set_defaults(func=_cmd_sweep)
+
+    p = sub.add_parser(
+        "validity",
+        help="physical validity battery per physics profile: held pushes vs clearance, chamfer, tilt",
+    )
+    p.add_argument("--profile", action="append", help="physics profile (repeatable; default seed and precision)")
+    p.add_argument("--trials", type=int, default=10, help="pushes per clearance (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the start-error draws (default 0)")
+    p.add_argument("--out", default="runs/validity", help="output directory (default runs/validity)")
+    p.set_defaults(func=_cmd_validity)
 
     p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")
     p.add_argument("dir", help="a sweep's output directory")

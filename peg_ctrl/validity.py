@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
@@ -42,7 +43,20 @@ from peg_ctrl.scene import (
     build_model,
 )
 
-__all__ = ["PushCase", "PushResult", "held_push", "wedging_depth", "wedging_tilt"]
+__all__ = [
+    "PushCase",
+    "PushResult",
+    "held_push",
+    "wedging_depth",
+    "wedging_tilt",
+    "Trial",
+    "clearance_study",
+    "chamfer_cases",
+    "tilt_cases",
+    "penetration_case",
+    "CLEARANCES",
+    "INSERTED_DEPTH",
+]
 
 GRASP_OFFSET = 0.010  # peg axis from the pinch point along the fingers, as the task grasps [m]
 _CLOSE_TIME = 0.6  # jaw closing with the peg held in place [s]
@@ -61,7 +75,7 @@ class PushCase:
     clearance: float = 0.0001  # radial; negative is an interference fit
     chamfer: float = 0.0
     lateral_error: float = 0.0  # peg axis from the hole axis along +X at the start
-    tilt: float = 0.0  # about world Y, the lower end leading towards -X... (positive tilts +X top)
+    tilt: float = 0.0  # about world Y, through the peg's lower end
     force: float = 10.0  # downward push on top of gravity compensation
     duration: float = 2.0  # of the push (the descent runs at 30 mm/s)
     start_height: float = 0.001  # peg lower end above the mouth at the start
@@ -91,16 +105,28 @@ class PushResult:
     peak_force: float  # peg-block contact force, whole push
     steady_force: float  # mean over the last _STEADY_WINDOW
     penetration: float  # deepest true overlap over the last _STEADY_WINDOW (>= 0)
+    steady_distance: float  # mean closest peg-block surface distance, last window (< 0: overlap,
+    # > 0: held off, as the seed's 1 mm margin holds a peg above the top face); nan without contact
     peak_penetration: float  # deepest true overlap over the whole push
     slip: float  # peg displacement in the pad frame over the push
     final_tilt: float  # peg axis from vertical at the end [rad]
     max_solver_iterations: int
-    steps: int
-    wall_time_s: float
+    steps: int  # physics steps of the push
+    wall_time_s: float  # of the push, including the measurements
     trace: NDArray[np.float64] | None = None  # (steps, 4): time [s], depth [m], force [N], overlap [m]
 
     def inserted(self, depth: float = 0.04) -> bool:
         return self.depth >= depth
+
+    @property
+    def us_per_step(self) -> float:
+        return 1e6 * self.wall_time_s / self.steps
+
+    def summary(self) -> dict[str, float | int | str]:
+        """Plain numbers for JSON (no trace)."""
+        out = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("case", "trace")}
+        out.update({f"case_{k}": v for k, v in dataclasses.asdict(self.case).items()})
+        return out
 
 
 def wedging_depth(clearance: float, tilt: float, radius: float = 0.010) -> float:
@@ -191,10 +217,12 @@ class _Rig:
     def peg_in_pad(self, data: mujoco.MjData) -> NDArray[np.float64]:
         return data.xmat[self.pad].reshape(3, 3).T @ (data.xpos[self.peg] - data.xpos[self.pad])
 
-    def peg_block_contact(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple[float, float]:
-        """Net peg-block contact force magnitude [N] and the deepest true overlap [m] (>= 0)."""
+    def peg_block_contact(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple[float, float, float]:
+        """Net peg-block contact force magnitude [N], the deepest true overlap [m] (>= 0) and
+        the closest surface distance [m] among active contacts (nan if none)."""
         total = np.zeros(3)
         overlap = 0.0
+        closest = math.nan
         f6 = np.empty(6)
         for i in range(data.ncon):
             c = data.contact[i]
@@ -208,7 +236,8 @@ class _Rig:
                 mujoco.mj_contactForce(model, data, i, f6)
                 total += c.frame.reshape(3, 3).T @ f6[:3]
             overlap = max(overlap, -c.dist)
-        return float(np.linalg.norm(total)), overlap
+            closest = c.dist if math.isnan(closest) else min(closest, c.dist)
+        return float(np.linalg.norm(total)), overlap, closest
 
 
 def _initial_state(
@@ -262,7 +291,6 @@ def held_push(
     peg_pose = data.qpos[rig.peg_qpos : rig.peg_qpos + 7].copy()
     dt = model.opt.timestep
     data.ctrl[rig.jaw_act] = load_default().sep_to_byte(0.0)
-    started = time.perf_counter()
     for _ in range(round(_CLOSE_TIME / dt)):  # close on a peg held in place
         rig.control(data, pinch, q_grip, None)
         mujoco.mj_step(model, data)
@@ -279,13 +307,15 @@ def held_push(
     n_steady = max(1, round(_STEADY_WINDOW / dt))
     depth = max_depth = peak_force = peak_pen = slip = 0.0
     steady_forces: list[float] = []
+    steady_dist: list[float] = []
     steady_pen = 0.0
     max_iter = 0
     rows = np.zeros((n_push, 4)) if trace else None
+    started = time.perf_counter()
     for step in range(n_push):
         rig.control(data, pinch, q_grip, case.force)
         mujoco.mj_step(model, data)
-        force, pen = rig.peg_block_contact(model, data)
+        force, pen, dist = rig.peg_block_contact(model, data)
         z = min(data.site_xpos[lower[0], 2], data.site_xpos[lower[1], 2])
         depth = top - z
         max_depth = max(max_depth, depth)
@@ -298,6 +328,8 @@ def held_push(
         if step >= n_push - n_steady:
             steady_forces.append(force)
             steady_pen = max(steady_pen, pen)
+            if not math.isnan(dist):
+                steady_dist.append(dist)
     axis = data.xmat[rig.peg].reshape(3, 3)[:, 2]
     return PushResult(
         case=case,
@@ -307,6 +339,7 @@ def held_push(
         peak_force=float(peak_force),
         steady_force=float(np.mean(steady_forces)),
         penetration=float(steady_pen),
+        steady_distance=float(np.mean(steady_dist)) if steady_dist else math.nan,
         peak_penetration=float(peak_pen),
         slip=slip,
         final_tilt=float(math.acos(min(1.0, abs(axis[2])))),
@@ -315,3 +348,90 @@ def held_push(
         wall_time_s=time.perf_counter() - started,
         trace=rows,
     )
+
+
+# -- the standard battery -------------------------------------------------------------------------
+CLEARANCES = (0.25e-3, 0.1e-3, 0.05e-3, 0.02e-3, 0.0, -0.02e-3)  # radial [m]
+INSERTED_DEPTH = 0.040  # a push "inserts" when the peg ends at least this deep [m]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trial:
+    """One randomised push of the clearance study."""
+
+    clearance: float
+    trial: int
+    lateral_error: float
+    tilt: float
+    result: PushResult
+
+    @property
+    def inserted(self) -> bool:
+        return self.result.inserted(INSERTED_DEPTH)
+
+
+def clearance_study(
+    physics: str | PhysicsProfile,
+    clearances: tuple[float, ...] = CLEARANCES,
+    *,
+    trials: int = 10,
+    seed: int = 0,
+    lateral_range: float = 0.05e-3,
+    tilt_range: float = math.radians(0.05),
+    on_result: Callable[[Trial], None] | None = None,
+) -> list[Trial]:
+    """Held pushes at each clearance: ``trials`` runs with the start's lateral error and tilt
+    drawn uniformly within ``±lateral_range`` [m] and ``±tilt_range`` [rad] (trial 0 is exact).
+
+    A real fixture places a part to a few hundredths of a millimetre and a fraction of a degree;
+    the spread turns the outcome at each clearance into a rate.
+    """
+    prof = profile(physics)
+    rng = np.random.default_rng(seed)
+    draws = [(0.0, 0.0)] + [
+        (float(rng.uniform(-lateral_range, lateral_range)), float(rng.uniform(-tilt_range, tilt_range)))
+        for _ in range(trials - 1)
+    ]
+    out = []
+    for c in clearances:
+        case0 = PushCase(clearance=c)
+        model = build_model(dataclasses.replace(SceneConfig(), assets=case0.assets()), prof)
+        for i, (e, tilt) in enumerate(draws):
+            case = dataclasses.replace(case0, lateral_error=e, tilt=tilt)
+            trial = Trial(c, i, e, tilt, held_push(case, prof, model=model))
+            out.append(trial)
+            if on_result is not None:
+                on_result(trial)
+    return out
+
+
+def chamfer_cases(width: float = 1.0e-3, clearance: float = 0.1e-3) -> list[tuple[PushCase, bool | None]]:
+    """Lateral errors around a chamfer of ``width`` [m]: (case, expected capture).
+
+    Expected: captured below ``width - 0.1 mm``, not captured above ``width + clearance + 0.1 mm``
+    (the peg's rim lands on the flat top); None in between (the rim lands on the chamfer's edge).
+    """
+    errors = (0.3e-3, 0.6e-3, width - 0.15e-3, width, width + clearance + 0.15e-3, width + 0.6e-3)
+    cases = []
+    for e in errors:
+        if e < width - 0.1e-3:
+            expected: bool | None = True
+        elif e > width + clearance + 0.1e-3:
+            expected = False
+        else:
+            expected = None
+        cases.append((PushCase(clearance=clearance, chamfer=width, lateral_error=e), expected))
+    return cases
+
+
+def tilt_cases(clearance: float = 0.1e-3) -> list[tuple[PushCase, float]]:
+    """Tilts well below and above the limit for a 40 mm insertion: (case, geometric depth [m])."""
+    limit = wedging_tilt(clearance, INSERTED_DEPTH)
+    tilts = (limit / 3.0, 3.5 * limit, 7.0 * limit)
+    return [(PushCase(clearance=clearance, tilt=t), wedging_depth(clearance, t)) for t in tilts]
+
+
+def penetration_case() -> PushCase:
+    """The peg's flat end pushed on the block's top face, 25 mm off the hole axis: all of it on
+    the flat, clear of the hole."""
+    return PushCase(clearance=0.1e-3, lateral_error=0.025)
