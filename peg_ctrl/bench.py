@@ -9,6 +9,7 @@ medians compared, so machine load affects both sides alike.
 
 from __future__ import annotations
 
+import copy
 import json
 import platform
 import statistics
@@ -26,7 +27,7 @@ from peg_ctrl.scene import SceneConfig, build_model
 from peg_ctrl.tasks.tracking import TrackingTask
 from peg_ctrl.timing import control_decimation
 
-__all__ = ["bench_controller", "run_benchmarks"]
+__all__ = ["bench_controller", "bench_profiles", "run_benchmarks"]
 
 
 def _solver_period_us(controller: Any) -> float:
@@ -197,6 +198,72 @@ def bench_episode(
         "overhead_ratio": statistics.median(a / b for a, b in zip(full_t, raw_t, strict=True)) - 1.0,
         "logging_share_of_overhead": (full - quiet_time) / max(full - raw, 1e-12),
         "note": "wall time of the loops; the quiet run also records its controls for the replay",
+    }
+
+
+# Held pushes (peg_ctrl.validity) after whose end each profile is timed. Named by the push, not
+# by the outcome: the profiles may end differently (the seed inserts the 0-clearance and the
+# tilted peg, the precision profile stops both at the mouth / wedges the tilted one).
+_CONTACT_SITUATIONS = {
+    "on top face": {"clearance": 0.1e-3, "lateral_error": 0.025},
+    "0 clearance": {"clearance": 0.0},
+    "1 deg tilt": {"clearance": 0.1e-3, "tilt": 0.0175},
+    "chamfer rim": {"clearance": 0.1e-3, "chamfer": 1e-3, "lateral_error": 1.25e-3},
+}
+
+
+def bench_profiles(
+    profiles: tuple[str, ...] = ("seed", "precision"), *, n_steps: int = 400, repeats: int = 5
+) -> dict[str, Any]:
+    """Cost of a physics step per profile in contact: each profile's held push is run into each
+    situation of ``_CONTACT_SITUATIONS``; ``n_steps`` steps from the final state (same controls)
+    are then timed, profiles alternating within every repetition, medians taken."""
+    import dataclasses
+
+    from peg_ctrl.physics import profile
+    from peg_ctrl.validity import PushCase, held_push
+
+    states: dict[tuple[str, str], tuple[mujoco.MjModel, mujoco.MjData]] = {}
+    for name in profiles:
+        profile(name)
+        for situation, fields in _CONTACT_SITUATIONS.items():
+
+            def keep(m: mujoco.MjModel, d: mujoco.MjData, key: tuple[str, str] = (name, situation)) -> None:
+                states[key] = (m, copy.copy(d))
+
+            held_push(dataclasses.replace(PushCase(duration=1.0), **fields), name, on_finish=keep)
+    times: dict[tuple[str, str], list[float]] = {key: [] for key in states}
+    for _ in range(repeats):
+        for key, (model, start) in states.items():
+            data = copy.copy(start)
+            t0 = time.thread_time()
+            mujoco.mj_step(model, data, nstep=n_steps)
+            times[key].append((time.thread_time() - t0) / n_steps)
+    rows = []
+    for (name, situation), samples in times.items():
+        model, start = states[(name, situation)]
+        step_us = statistics.median(samples) * 1e6
+        rows.append(
+            {
+                "profile": name,
+                "situation": situation,
+                "timestep_ms": model.opt.timestep * 1e3,
+                "contacts": int(start.ncon),
+                "constraint_rows": int(start.nefc),
+                "step_us_median": step_us,
+                "us_per_simulated_ms": step_us * 1e-3 / model.opt.timestep,
+            }
+        )
+    base = {r["situation"]: r["us_per_simulated_ms"] for r in rows if r["profile"] == profiles[0]}
+    for r in rows:
+        r[f"cost_vs_{profiles[0]}"] = r["us_per_simulated_ms"] / base[r["situation"]]
+    return {
+        "what": "physics profiles in contact",
+        "method": "held push (peg_ctrl.validity) into each situation, then n_steps of bare mj_step "
+        "from its final state; profiles alternate within each repetition; medians of CPU time",
+        "n_steps": n_steps,
+        "repeats": repeats,
+        "rows": rows,
     }
 
 

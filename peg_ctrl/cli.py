@@ -130,6 +130,21 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if args.sweep and args.sweep_episodes < 1:
         raise ConfigError(f"--sweep-episodes must be >= 1, got {args.sweep_episodes}")
     out = prepare_output_file(args.out)
+    if args.physics:
+        import json
+
+        from peg_ctrl.bench import bench_profiles
+
+        result = bench_profiles(repeats=args.repeats)
+        atomic_write_text(out, json.dumps(result, indent=2) + "\n")
+        for r in result["rows"]:
+            print(
+                f"{r['profile']:>10} {r['situation']:<12}: {r['step_us_median']:7.1f} us/step "
+                f"(dt {r['timestep_ms']:g} ms, {r['contacts']} contacts), "
+                f"{r['us_per_simulated_ms']:7.1f} us per simulated ms, {r['cost_vs_seed']:.2f}x seed"
+            )
+        print(f"wrote {out}")
+        return 0
     if args.sweep:
         import json
 
@@ -385,6 +400,9 @@ def _parser() -> argparse.ArgumentParser:
         help="control period in s to bench (repeatable; default: each controller's own)",
     )
     p.add_argument("--sweep", action="store_true", help="instead: sweep speedup of 2 workers over 1")
+    p.add_argument(
+        "--physics", action="store_true", help="instead: cost per step of each physics profile in contact"
+    )
     p.add_argument("--sweep-episodes", type=int, default=6, help="episodes per sweep timing (default 6)")
     p.set_defaults(func=_cmd_bench)
 

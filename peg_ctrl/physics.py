@@ -106,6 +106,8 @@ def parts_for_roundness(inradius: float, tolerance: float) -> int:
     """Fewest polygon sides whose corners lie within ``tolerance`` [m] outside the ``inradius``."""
     if not (math.isfinite(tolerance) and tolerance > 0.0):
         raise ConfigError(f"hole roundness tolerance must be > 0 m, got {tolerance!r}")
+    if not (math.isfinite(inradius) and inradius > 0.0):
+        raise ConfigError(f"hole inradius must be > 0 m, got {inradius!r}")
     n = math.ceil(math.pi / math.acos(inradius / (inradius + tolerance)))
     while inradius / math.cos(math.pi / n) - inradius > tolerance:  # guard the rounding
         n += 1

@@ -275,10 +275,12 @@ def held_push(
     scene: SceneConfig | None = None,
     model: mujoco.MjModel | None = None,
     trace: bool = False,
+    on_finish: Callable[[mujoco.MjModel, mujoco.MjData], None] | None = None,
 ) -> PushResult:
     """Grasp, then push ``case.force`` newtons down for ``case.duration`` seconds; measure.
 
-    ``model`` (compiled for this case's geometry and profile) may be passed to skip compiling.
+    ``model`` (compiled for this case's geometry and profile) may be passed to skip compiling;
+    ``on_finish(model, data)`` sees the final state (the benchmark times steps from it).
     """
     prof = profile(physics)
     base = scene or SceneConfig()
@@ -331,6 +333,8 @@ def held_push(
             if not math.isnan(dist):
                 steady_dist.append(dist)
     axis = data.xmat[rig.peg].reshape(3, 3)[:, 2]
+    if on_finish is not None:
+        on_finish(model, data)
     return PushResult(
         case=case,
         profile=prof.name,
