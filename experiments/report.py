@@ -231,7 +231,8 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         "",
         f"{len(rows)} episodes: controllers {', '.join(dict.fromkeys(r['controller'] for r in rows))}; "
         f"planners {', '.join(exp.get('planners', []))}; clearances "
-        f"{clearances}; {len(exp.get('seeds', []))} seeds."
+        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
+        f"`{exp.get('physics', {}).get('profile', 'seed')}`."
         + (f" Run time {elapsed_s:.0f} s." if elapsed_s is not None else ""),
         "",
         "## Summary",

@@ -417,7 +417,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", help="ruckig (default) or fixed_speed")
     p.add_argument("--seed", type=int, help="random seed for the initial conditions (default 0)")
     p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose from the seed")
-    p.add_argument("--max-steps", type=int, help="physics step limit (default: 20 s of simulated time, 20000 steps in the seed profile)")
+    p.add_argument(
+        "--max-steps",
+        type=int,
+        help="physics step limit (default: 20 s of simulated time, 20000 steps in the seed profile)",
+    )
     p.add_argument("--out", default="runs/episode", help="output directory (default runs/episode)")
     p.add_argument("--video", action="store_true", help="also render DIR/episode.mp4 offscreen")
     p.add_argument("--viewer", action="store_true", help="show the episode in the MuJoCo viewer instead")
@@ -465,7 +469,9 @@ def _parser() -> argparse.ArgumentParser:
         "validity",
         help="physical validity battery per physics profile: held pushes vs clearance, chamfer, tilt",
     )
-    p.add_argument("--profile", action="append", help="physics profile (repeatable; default seed and precision)")
+    p.add_argument(
+        "--profile", action="append", help="physics profile (repeatable; default seed and precision)"
+    )
     p.add_argument("--trials", type=int, default=10, help="pushes per clearance (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start-error draws (default 0)")
     p.add_argument("--out", default="runs/validity", help="output directory (default runs/validity)")

@@ -125,7 +125,6 @@ class EpisodeConfig:
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
 
-
     def step_limit(self, timestep: float) -> int:
         """Physics steps the episode may take: ``max_steps``, else :data:`EPISODE_TIME` worth."""
         return self.max_steps if self.max_steps is not None else round(EPISODE_TIME / timestep)
@@ -145,6 +144,7 @@ class EpisodeResult:
     phase: str  # phase when the episode ended
     controller: str
     planner: str
+    physics: str  # the physics profile
     seed: int
     total_timesteps: int
     sim_time_s: float
@@ -176,7 +176,8 @@ class EpisodeResult:
             head = f"{self.status.upper()} ({self.reason} in {self.phase})"
         tti = f", inserted at {self.time_to_insert_s:.2f} s" if self.time_to_insert_s is not None else ""
         return (
-            f"{head}: {self.controller}+{self.planner} seed {self.seed}, {self.total_timesteps} steps "
+            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({self.physics} physics), "
+            f"{self.total_timesteps} steps "
             f"({self.sim_time_s:.2f} s sim, {self.wall_time_s:.1f} s wall){tti}, "
             f"depth {self.insertion_depth_m * 1e3:.1f} mm, "
             f"peak peg-block force {self.peak_contact_force_n:.2f} N"
@@ -320,6 +321,7 @@ def _result(
         phase=task.phase if task.phase != "done" else records[-1].phase,
         controller=cfg.controller.name,
         planner=cfg.planner,
+        physics=cfg.physics.profile,
         seed=cfg.seed,
         total_timesteps=loop.steps,
         sim_time_s=float(loop.data.time),

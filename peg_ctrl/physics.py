@@ -155,7 +155,9 @@ def profile(name_or_profile: str | PhysicsProfile) -> PhysicsProfile:
     try:
         return PROFILES[name_or_profile]
     except KeyError:
-        raise UnknownComponent("physics profile", name_or_profile, PROFILES, where="physics.profile") from None
+        raise UnknownComponent(
+            "physics profile", name_or_profile, PROFILES, where="physics.profile"
+        ) from None
 
 
 def check_scene(name: str | PhysicsProfile, assets: AssetParams) -> None:

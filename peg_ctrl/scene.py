@@ -495,9 +495,7 @@ def export_robot(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
     return path
 
 
-def export_scene(
-    out_dir: Path, cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED
-) -> Path:
+def export_scene(out_dir: Path, cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED) -> Path:
     """Write ``out_dir/scene.xml`` plus its meshes under ``out_dir/meshes``.
 
     The result loads with plain ``mujoco.MjModel.from_xml_path`` and opens in MuJoCo's own viewer.

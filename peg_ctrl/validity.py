@@ -90,8 +90,9 @@ class PushCase:
         if not (math.isfinite(self.tilt) and abs(self.tilt) < 0.5):
             raise ConfigError(f"tilt must be within +-0.5 rad, got {self.tilt!r}")
 
-    def assets(self, base: AssetParams = AssetParams()) -> AssetParams:
-        return dataclasses.replace(base, clearance=self.clearance, chamfer=self.chamfer)
+    def assets(self, base: AssetParams | None = None) -> AssetParams:
+        """``base`` (default: the default assets) with this case's clearance and chamfer."""
+        return dataclasses.replace(base or AssetParams(), clearance=self.clearance, chamfer=self.chamfer)
 
 
 @dataclasses.dataclass(frozen=True)

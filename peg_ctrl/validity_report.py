@@ -45,7 +45,12 @@ def run_battery(
         profile(name)  # unknown names fail before any work
     n_checks = len(chamfer_cases()) + len(tilt_cases()) + 1
     total = len(profiles) * (len(CLEARANCES) * trials + n_checks)
-    data: dict[str, Any] = {"trials": trials, "seed": seed, "inserted_depth_m": INSERTED_DEPTH, "profiles": {}}
+    data: dict[str, Any] = {
+        "trials": trials,
+        "seed": seed,
+        "inserted_depth_m": INSERTED_DEPTH,
+        "profiles": {},
+    }
     study: dict[str, list[Trial]] = {}
     with tqdm(total=total, desc="validity", unit="push", disable=not progress) as bar:
         for name in profiles:
@@ -128,7 +133,10 @@ def _markdown(data: dict[str, Any]) -> str:
     for p in profiles:
         d = data["profiles"][p]
         lines += ["", f"## Profile `{p}`", "", "Chamfer 1.0 mm wide (45°), clearance 0.1 mm:", ""]
-        lines += ["| lateral error [mm] | expected | captured | depth [mm] | peak force [N] |", "|---|---|---|---|---|"]
+        lines += [
+            "| lateral error [mm] | expected | captured | depth [mm] | peak force [N] |",
+            "|---|---|---|---|---|",
+        ]
         for r in d["chamfer"]:
             exp = {True: "capture", False: "no capture", None: "edge (either)"}[r["expected_capture"]]
             got = "yes" if r["depth"] >= INSERTED_DEPTH else "no"
@@ -136,7 +144,11 @@ def _markdown(data: dict[str, Any]) -> str:
                 f"| {r['case_lateral_error'] * 1e3:.2f} | {exp} | {got} | {r['depth'] * 1e3:.2f} | "
                 f"{r['peak_force']:.1f} |"
             )
-        lines += ["", "Tilt, clearance 0.1 mm (geometric wedging depth of a rigid peg, two-point contact):", ""]
+        lines += [
+            "",
+            "Tilt, clearance 0.1 mm (geometric wedging depth of a rigid peg, two-point contact):",
+            "",
+        ]
         lines += ["| tilt [deg] | geometric depth [mm] | depth [mm] | ratio |", "|---|---|---|---|"]
         for r in d["tilt"]:
             g = r["geometric_depth_m"]

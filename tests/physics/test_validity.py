@@ -40,10 +40,16 @@ def test_aligned_push_inserts_only_with_clearance(clearance: float, record_prope
     r = held_push(PushCase(clearance=clearance), PROFILE)
     record_property("depth_mm", r.depth * 1e3)
     if clearance > 0:
-        assert r.depth >= INSERTED_DEPTH, f"{clearance * 1e3:.2f} mm clearance: only {r.depth * 1e3:.2f} mm deep"
+        assert r.depth >= INSERTED_DEPTH, (
+            f"{clearance * 1e3:.2f} mm clearance: only {r.depth * 1e3:.2f} mm deep"
+        )
     else:
-        assert r.max_depth <= ENTRY_LIMIT, f"interference {clearance * 1e3:.2f} mm entered {r.max_depth * 1e3:.2f} mm"
-        assert r.steady_force == pytest.approx(10.0, abs=1.0)  # it is held up by the block, not by friction loss
+        assert r.max_depth <= ENTRY_LIMIT, (
+            f"interference {clearance * 1e3:.2f} mm entered {r.max_depth * 1e3:.2f} mm"
+        )
+        assert r.steady_force == pytest.approx(
+            10.0, abs=1.0
+        )  # it is held up by the block, not by friction loss
 
 
 def test_penetration_at_10n_steady_contact() -> None:
@@ -72,9 +78,13 @@ def _chamfer_params() -> list[object]:
 def test_chamfer_capture_range(case: PushCase, captured: bool) -> None:
     r = held_push(case, PROFILE)
     if captured:
-        assert r.depth >= INSERTED_DEPTH, f"e={case.lateral_error * 1e3:.2f} mm not captured by a 1 mm chamfer"
+        assert r.depth >= INSERTED_DEPTH, (
+            f"e={case.lateral_error * 1e3:.2f} mm not captured by a 1 mm chamfer"
+        )
     else:
-        assert r.max_depth <= ENTRY_LIMIT, f"e={case.lateral_error * 1e3:.2f} mm entered {r.max_depth * 1e3:.2f} mm"
+        assert r.max_depth <= ENTRY_LIMIT, (
+            f"e={case.lateral_error * 1e3:.2f} mm entered {r.max_depth * 1e3:.2f} mm"
+        )
 
 
 @pytest.mark.parametrize(
@@ -88,7 +98,8 @@ def test_tilt_wedges_at_the_geometric_depth(case: PushCase, geometric: float, re
         assert r.depth >= INSERTED_DEPTH
     else:
         assert geometric / 2 <= r.depth <= 2 * geometric, (
-            f"tilt {math.degrees(case.tilt):.2f} deg wedged at {r.depth * 1e3:.2f} mm; geometry says {geometric * 1e3:.2f}"
+            f"tilt {math.degrees(case.tilt):.2f} deg wedged at {r.depth * 1e3:.2f} mm; "
+            f"geometry says {geometric * 1e3:.2f}"
         )
 
 
