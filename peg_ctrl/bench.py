@@ -284,6 +284,7 @@ def run_benchmarks(
     episodes = (
         [bench_episode(controller=c, repeats=max(1, repeats // 2)) for c in controllers] if episode else []
     )
+    physics = bench_profiles(repeats=repeats) if episode else None
     results = {
         "machine": {
             "python": platform.python_version(),
@@ -295,6 +296,7 @@ def run_benchmarks(
         "target": "overhead_ratio <= 0.05",
         "controllers": entries,
         "episodes": episodes,
+        "physics_profiles": physics,
     }
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2) + "\n")

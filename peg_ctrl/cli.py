@@ -115,6 +115,15 @@ def _check_controller(name: str) -> None:
         raise UnknownComponent("controller", name, REGISTRY)
 
 
+def _print_profiles(result: dict[str, Any]) -> None:
+    for r in result["rows"]:
+        print(
+            f"{r['profile']:>10} {r['situation']:<12}: {r['step_us_median']:7.1f} us/step "
+            f"(dt {r['timestep_ms']:g} ms, {r['contacts']} contacts), "
+            f"{r['us_per_simulated_ms']:7.1f} us per simulated ms, {r['cost_vs_seed']:.2f}x seed"
+        )
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from peg_ctrl.bench import run_benchmarks
     from peg_ctrl.controllers import REGISTRY
@@ -137,12 +146,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
         result = bench_profiles(repeats=args.repeats)
         atomic_write_text(out, json.dumps(result, indent=2) + "\n")
-        for r in result["rows"]:
-            print(
-                f"{r['profile']:>10} {r['situation']:<12}: {r['step_us_median']:7.1f} us/step "
-                f"(dt {r['timestep_ms']:g} ms, {r['contacts']} contacts), "
-                f"{r['us_per_simulated_ms']:7.1f} us per simulated ms, {r['cost_vs_seed']:.2f}x seed"
-            )
+        _print_profiles(result)
         print(f"wrote {out}")
         return 0
     if args.sweep:
@@ -172,6 +176,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             f"solve median {r['solver_call_us_median']:.1f} us (p99 {r['solver_call_us_p99']:.1f} us, "
             f"period {r['solver_period_us']:.0f} us)"
         )
+    if results.get("physics_profiles"):
+        _print_profiles(results["physics_profiles"])
     for e in results["episodes"]:
         print(
             f"{e['controller']:>10} episode: physics {e['raw_step_us_median']:.1f} us/step, loop "

@@ -221,6 +221,27 @@ def test_bench_sweep_writes_exactly_out(tmp_path: Path, monkeypatch: pytest.Monk
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["s", "sweep.json"]
 
 
+def test_bench_physics_writes_exactly_out(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import peg_ctrl.bench
+
+    row = {
+        "profile": "precision",
+        "situation": "on top face",
+        "step_us_median": 60.0,
+        "timestep_ms": 0.5,
+        "contacts": 44,
+        "us_per_simulated_ms": 120.0,
+        "cost_vs_seed": 0.5,
+    }
+    monkeypatch.setattr(peg_ctrl.bench, "bench_profiles", lambda repeats: {"rows": [row], "repeats": repeats})
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--physics", "--repeats", "2", "--out", "p/phys.json"]) == 0
+    assert json.loads((tmp_path / "p" / "phys.json").read_text()) == {"rows": [row], "repeats": 2}
+    assert "precision on top face :    60.0 us/step (dt 0.5 ms, 44 contacts)" in capsys.readouterr().out
+
+
 def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sweep", "--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
