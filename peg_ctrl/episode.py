@@ -218,7 +218,10 @@ def prepare_model(cfg: EpisodeConfig, draw: DomainDraw) -> mujoco.MjModel:
     for g in range(model.ngeom):
         if model.geom_bodyid[g] in (peg, model.body("block").id):
             model.geom_friction[g, 0] *= draw.friction_scale
-    model.pair_friction[:, :2] *= draw.friction_scale  # explicit peg-block pairs (precision)
+    block = model.body("block").id
+    for i in range(model.npair):  # explicit peg-block pairs (precision profile)
+        if block in (model.geom_bodyid[model.pair_geom1[i]], model.geom_bodyid[model.pair_geom2[i]]):
+            model.pair_friction[i, :2] *= draw.friction_scale
     mujoco.mj_setConst(model, mujoco.MjData(model))
     return model
 

@@ -13,13 +13,15 @@
     - the hole is a polygon with as many sides as it takes to stay within
       ``hole_roundness`` (10 µm) of the nominal radius: flats at the nominal radius, corners at
       most 10 µm outside it;
-    - peg-block contacts have no margin (they act when the surfaces meet), a time constant of
-      two physics steps and impedance 0.99..0.999, so 10 N of steady contact penetrates a few µm;
-    - the peg-block pair uses ``condim`` 3: sliding friction only. Torsional and rolling friction
+    - the peg's contacts with the block and the table are explicit pairs with no margin (they
+      act when the surfaces meet), a time constant of two physics steps and impedance
+      0.99..0.999, so 10 N of steady contact penetrates a few µm;
+    - those pairs use ``condim`` 3: sliding friction only. Torsional and rolling friction
       model a contact patch, which between rigid metal parts is microns wide; the seed's 0.1 m
       torsional coefficient (a patch ~20 cm across) resists the peg straightening in the hole;
     - the Newton solver runs to convergence (tolerance 1e-10) at a 0.5 ms step with the
-      ``implicitfast`` integrator; noslip keeps the grasp.
+      ``implicitfast`` integrator; ``impratio`` 100 keeps the grasp without noslip, whose cost
+      grows with the square of the contact count.
 
 A profile changes the compiled model only: tasks, controllers and the loop do not know which
 one is in use (the control period must be a whole number of physics steps, which both meet at
@@ -51,10 +53,10 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class PairContact:
-    """Contact parameters of the peg against the block, one explicit MuJoCo ``pair`` per part."""
+    """Contact parameters of the peg against each block part and the table (explicit ``pair``s)."""
 
-    condim: int = 3
-    friction: tuple[float, float, float, float, float] = (0.9, 0.9, 0.0, 0.0, 0.0)
+    condim: int = 3  # sliding friction; the coefficient is the larger of the scene's peg and
+    # block sliding frictions, as MuJoCo would mix them (SceneConfig.peg_friction/block_friction)
     solref: tuple[float, float] = (0.001, 1.0)  # [s, damping ratio]
     solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 1e-4, 0.5, 2.0)
     margin: float = 0.0  # [m]
@@ -88,7 +90,7 @@ class PhysicsProfile:
         n = parts_for_roundness(params.hole_inradius, self.hole_roundness)
         return dataclasses.replace(params, n_parts=n)
 
-    def apply_options(self, opt: mujoco.MjOption | mujoco.MjsOption) -> None:  # type: ignore[name-defined]
+    def apply_options(self, opt: mujoco.MjOption) -> None:
         opt.timestep = self.timestep
         opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator}")
         opt.solver = getattr(mujoco.mjtSolver, f"mjSOL_{self.solver}")

@@ -102,6 +102,8 @@ class SceneConfig:
         return (self.peg_xy[0], self.peg_xy[1], self.assets.peg_radius)
 
 
+_TABLE_FRICTION = 1.0  # MuJoCo's default sliding friction; the table geom keeps it (SPEC is silent)
+
 # 90 degrees about X: the peg's axis (local Z) lies along world -Y.
 PEG_LYING_QUAT = (np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0)
 
@@ -219,20 +221,23 @@ def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile, fil
         site.group = 5
 
 
-def _add_peg_block_pairs(spec: mujoco.MjSpec, physics: PhysicsProfile, parts: list[str]) -> None:
-    """Explicit peg-part contact pairs with the profile's parameters (instead of mixing the
-    peg's and the block's per-geom values, which also govern the grasp)."""
+def _add_peg_pairs(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile, parts: list[str]) -> None:
+    """Explicit peg-part and peg-table contact pairs with the profile's parameters (instead of
+    mixing the peg's and the block's per-geom values, which also govern the grasp)."""
     c = physics.pair
     if c is None:
         return
-    exclude = spec.add_exclude()
-    exclude.bodyname1, exclude.bodyname2 = "peg", "block"
-    for part in parts:
+    partners = [(part, max(cfg.peg_friction[0], cfg.block_friction[0])) for part in parts]
+    partners.append(("table", max(cfg.peg_friction[0], _TABLE_FRICTION)))
+    for body in ("block", "world"):  # the table is a world geom
+        exclude = spec.add_exclude()
+        exclude.bodyname1, exclude.bodyname2 = "peg", body
+    for geom, mu in partners:
         pair = spec.add_pair()
-        pair.name = f"peg-{part}"
-        pair.geomname1, pair.geomname2 = "peg", part
+        pair.name = f"peg-{geom}"
+        pair.geomname1, pair.geomname2 = "peg", geom
         pair.condim = c.condim
-        pair.friction = list(c.friction)
+        pair.friction = [mu, mu, 0.0, 0.0, 0.0]
         pair.solref = list(c.solref)
         pair.solimp = list(c.solimp)
         pair.margin = c.margin
@@ -428,7 +433,7 @@ def build_spec(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = S
     _add_table(spec)
     parts = _add_block(spec, cfg, assets, files)
     _add_peg(spec, cfg, physics, files)
-    _add_peg_block_pairs(spec, physics, parts)
+    _add_peg_pairs(spec, cfg, physics, parts)
     _add_gripper(spec, cfg)
     _add_cameras_and_lights(spec, cfg)
     _add_contact_sensors(spec)

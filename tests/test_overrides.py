@@ -131,7 +131,7 @@ def test_exported_model_is_the_precision_scene(exported: mujoco.MjModel) -> None
     assert exported.opt.timestep == 0.0005
     parts = [g for g in range(exported.ngeom) if exported.geom(g).name.startswith("object_")]
     assert len(parts) == parts_for_roundness(0.010 + 5e-5, 10e-6)
-    assert exported.npair == len(parts)
+    assert exported.npair == len(parts) + 1  # each block part and the table
 
 
 @pytest.mark.parametrize(

@@ -122,11 +122,11 @@ def test_precision_has_one_stiff_sliding_pair_per_block_part(precision_model: mu
     parts = _part_ids(m)
     assert len(parts) == parts_for_roundness(PEG_RADIUS + CLEARANCE, ROUNDNESS) == 71
     np.testing.assert_array_equal(m.geom_margin[parts], 0.0)
-    assert m.npair == len(parts)
+    assert m.npair == len(parts) + 1  # and the table
     peg = m.geom("peg").id
     pairs = [{int(a), int(b)} for a, b in zip(m.pair_geom1, m.pair_geom2, strict=True)]
     assert all(peg in pair for pair in pairs)  # MuJoCo may store either geom first
-    assert sorted(next(iter(pair - {peg})) for pair in pairs) == parts
+    assert sorted(next(iter(pair - {peg})) for pair in pairs) == sorted([*parts, m.geom("table").id])
     np.testing.assert_array_equal(m.pair_dim, 3)
     np.testing.assert_array_equal(m.pair_margin, 0.0)
     np.testing.assert_array_equal(m.pair_solref, np.tile([0.001, 1.0], (m.npair, 1)))
@@ -217,3 +217,28 @@ def test_step_limit_is_20_s_of_simulated_time_unless_given() -> None:
     assert EpisodeConfig().step_limit(0.0005) == 40000
     assert EpisodeConfig(max_steps=123).step_limit(0.0005) == 123
     assert EpisodeConfig(max_steps=123).step_limit(0.001) == 123
+
+
+def test_precision_pair_friction_follows_the_scene() -> None:
+    """The pairs take the larger sliding coefficient of the scene's peg and block (MuJoCo's own
+    mixing rule), so ``scene.block_friction`` still acts in the precision profile."""
+    cfg = SceneConfig(peg_friction=(0.3, 0.1, 1e-4), block_friction=(0.5, 0.1, 1e-4))
+    model = build_model(cfg, "precision")
+    table = model.pair("peg-table").id
+    block = [i for i in range(model.npair) if i != table]
+    np.testing.assert_array_equal(
+        model.pair_friction[block], np.tile([0.5, 0.5, 0.0, 0.0, 0.0], (len(block), 1))
+    )
+    np.testing.assert_array_equal(model.pair_friction[table], [1.0, 1.0, 0.0, 0.0, 0.0])  # the table's 1.0
+
+
+def test_domain_friction_scale_reaches_the_precision_pairs() -> None:
+    from peg_ctrl.episode import DomainConfig, domain_draw, prepare_model
+
+    cfg = EpisodeConfig(physics=PhysicsConfig("precision"), domain=DomainConfig(friction_scale=(1.5, 1.5)))
+    model = prepare_model(cfg, domain_draw(cfg.seed, cfg.domain))
+    table = model.pair("peg-table").id
+    block = [i for i in range(model.npair) if i != table]
+    np.testing.assert_allclose(model.pair_friction[block, :2], 1.35)
+    np.testing.assert_array_equal(model.pair_friction[:, 2:], 0.0)
+    np.testing.assert_array_equal(model.pair_friction[table, :2], 1.0)  # the table is not the domain's
