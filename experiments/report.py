@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from peg_ctrl.experiments.stats import ALPHA, compare_arms, median_ci
+
 __all__ = ["wilson_interval", "summarise", "write_report", "read_rows"]
 
 
@@ -52,6 +54,8 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             if t is not None
         ]
         reasons = Counter(r["reason"] for r in group if r["status"] != "success")
+        force_ci = median_ci(forces.tolist())
+        time_ci = median_ci(times)
         out.append(
             {
                 "controller": key[0],
@@ -63,8 +67,12 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "success_ci95_low": lo,
                 "success_ci95_high": hi,
                 "peak_force_median_n": float(np.median(forces)),
+                "peak_force_median_ci95_low_n": force_ci[1],
+                "peak_force_median_ci95_high_n": force_ci[2],
                 "peak_force_p95_n": float(np.percentile(forces, 95)),
                 "time_to_insert_median_s": float(np.median(times)) if times else None,
+                "time_to_insert_median_ci95_low_s": time_ci[1],
+                "time_to_insert_median_ci95_high_s": time_ci[2],
                 "failure_reasons": ";".join(f"{k}:{v}" for k, v in sorted(reasons.items())),
             }
         )
@@ -192,6 +200,48 @@ def _aligned_force(episode_dir: Path, column: str, grid: np.ndarray) -> np.ndarr
     return np.interp(grid, t, data[:, columns.index(column)], left=np.nan, right=np.nan)
 
 
+def _interval(lo: float | None, hi: float | None, fmt: str) -> str:
+    return "" if lo is None or hi is None else f"[{fmt.format(lo)}, {fmt.format(hi)}]"
+
+
+def _p(p: float | None) -> str:
+    if p is None:
+        return "–"
+    text = "< 0.001" if p < 0.001 else f"{p:.3f}"
+    return f"**{text}**" if p < ALPHA else text
+
+
+def _comparison_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Pairwise tests between the arms at each clearance, and which pairs differ."""
+    pairs = compare_arms(rows)
+    if not pairs:
+        return []
+    lines = [
+        "## Which arms differ",
+        "",
+        "Pairs of controller+planner at the same clearance. Success: Boschloo exact test; peak "
+        "peg-block force and time to insert (successes only): Mann-Whitney U. All p-values are "
+        f"two-sided and Holm-corrected over the pairs at that clearance; bold: p < {ALPHA}. Intervals "
+        "in the summary: Wilson (success), percentile bootstrap of the median (force, time).",
+        "",
+        "| clearance [mm] | A | B | success A / B | p | force median A / B [N] | p | time median A / B [s] "
+        "| p | differ in |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def num(x: float | None, fmt: str) -> str:
+        return "–" if x is None else fmt.format(x)
+
+    for c in pairs:
+        lines.append(
+            f"| {c.clearance_m * 1e3:g} | {c.arm_a} | {c.arm_b} | {c.success_a} / {c.success_b} | "
+            f"{_p(c.p_success)} | {num(c.force_median_a, '{:.1f}')} / {num(c.force_median_b, '{:.1f}')} | "
+            f"{_p(c.p_force)} | {num(c.time_median_a, '{:.2f}')} / {num(c.time_median_b, '{:.2f}')} | "
+            f"{_p(c.p_time)} | {', '.join(c.differs()) or 'no difference found'} |"
+        )
+    return [*lines, ""]
+
+
 def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
     head = "| " + " | ".join(title for _, title in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
@@ -225,6 +275,12 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         s["success"] = f"{s['successes']}/{s['episodes']} ({100 * s['success_rate']:.0f} %)"
         s["ci"] = f"[{100 * s['success_ci95_low']:.0f}, {100 * s['success_ci95_high']:.0f}] %"
         s["clearance_mm"] = s["clearance_m"] * 1e3
+        s["force_ci"] = _interval(
+            s["peak_force_median_ci95_low_n"], s["peak_force_median_ci95_high_n"], "{:.1f}"
+        )
+        s["time_ci"] = _interval(
+            s["time_to_insert_median_ci95_low_s"], s["time_to_insert_median_ci95_high_s"], "{:.2f}"
+        )
     clearances = ", ".join(f"{c * 1e3:g} mm" for c in exp.get("clearances", []))
     parts = [
         f"# Experiment report: {exp.get('name', out_dir.name)}",
@@ -246,12 +302,15 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
                 ("success", "success"),
                 ("ci", "95 % CI"),
                 ("peak_force_median_n", "peak force median [N]"),
+                ("force_ci", "95 % CI"),
                 ("peak_force_p95_n", "peak force p95 [N]"),
                 ("time_to_insert_median_s", "time to insert [s]"),
+                ("time_ci", "95 % CI"),
                 ("failure_reasons", "failures"),
             ],
         ),
         "",
+        *_comparison_section(rows),
     ]
     for title, name in plots:
         parts += [f"## {title}", "", f"![{title}]({name})", ""]

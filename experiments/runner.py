@@ -32,6 +32,27 @@ from peg_ctrl.io import atomic_write_text
 
 __all__ = ["run_sweep", "collect_rows", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
 
+# episodes.csv columns copied from each episode's summary.json.
+_SUMMARY_COLUMNS = (
+    "status",
+    "reason",
+    "phase",
+    "peak_contact_force_n",
+    "peak_any_contact_force_n",
+    "time_to_insert_s",
+    "insertion_depth_m",
+    "lateral_error_m",
+    "tilt_rad",
+    "max_penetration_m",
+    "resting_penetration_m",
+    "grip_penetration_m",
+    "peg_slip_m",
+    "physics",
+    "total_timesteps",
+    "sim_time_s",
+    "wall_time_s",
+)
+
 EPISODE_COLUMNS = (
     "key",
     "controller",
@@ -42,15 +63,7 @@ EPISODE_COLUMNS = (
     "peg_mass_scale",
     "friction_scale",
     "gain_scale",
-    "status",
-    "reason",
-    "phase",
-    "peak_contact_force_n",
-    "time_to_insert_s",
-    "max_penetration_m",
-    "peg_slip_m",
-    "total_timesteps",
-    "wall_time_s",
+    *_SUMMARY_COLUMNS,
     "log_path",
 )
 
@@ -231,15 +244,7 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
                 "clearance_m": job.clearance,
                 "seed": job.seed,
                 **draw,
-                "status": s["status"],
-                "reason": s["reason"],
-                "phase": s["phase"],
-                "peak_contact_force_n": s["peak_contact_force_n"],
-                "time_to_insert_s": s["time_to_insert_s"],
-                "max_penetration_m": s["max_penetration_m"],
-                "peg_slip_m": s["peg_slip_m"],
-                "total_timesteps": s["total_timesteps"],
-                "wall_time_s": s["wall_time_s"],
+                **{name: s[name] for name in _SUMMARY_COLUMNS},
                 "log_path": str(Path("episodes") / job.key / "log.jsonl"),
             }
         )
