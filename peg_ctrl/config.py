@@ -83,18 +83,13 @@ def _yaml_loader() -> type:
     return Loader
 
 
-_FLOAT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)$")
-
-
 def parse_value(text: str) -> Any:
     """A command-line value parsed as YAML, except that ``1e-5`` is a number (YAML 1.1 reads a
     mantissa without a dot as a string)."""
     import yaml
 
-    if _FLOAT.match(text.strip()):
-        return float(text)
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_yaml_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         raise ConfigError(f"value {text!r} is not valid YAML: {' '.join(str(exc).split())}") from None
 
@@ -116,7 +111,10 @@ def apply_overrides(data: dict[str, Any], assignments: Sequence[str]) -> dict[st
             raise ConfigError(
                 f"--set {item!r}: expected KEY=VALUE with a dotted KEY, e.g. physics.profile=precision"
             )
-        value = parse_value(raw)
+        try:
+            value = parse_value(raw)
+        except ConfigError as exc:
+            raise ConfigError(f"--set {key}: {exc}") from None
         node = result
         for depth, part in enumerate(parts[:-1]):
             child = node.get(part)

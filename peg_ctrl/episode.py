@@ -117,7 +117,7 @@ class EpisodeConfig:
     physics: PhysicsConfig = PhysicsConfig()
 
     def __post_init__(self) -> None:
-        check_scene(self.physics.profile, self.scene.assets)
+        check_scene(self.physics.profile, self.scene)
         if self.planner not in PLANNERS:
             raise ConfigError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
         if self.max_steps is not None and self.max_steps < 1:

@@ -32,14 +32,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import mujoco
 
 from peg_ctrl.assets import AssetParams
 from peg_ctrl.errors import ConfigError, UnknownComponent
 
+if TYPE_CHECKING:
+    from peg_ctrl.scene import SceneConfig
+
 __all__ = [
-    "PairContact",
+    "PegContactParams",
     "PhysicsProfile",
     "PhysicsConfig",
     "PROFILES",
@@ -52,7 +56,7 @@ __all__ = [
 
 
 @dataclasses.dataclass(frozen=True)
-class PairContact:
+class PegContactParams:
     """Contact parameters of the peg against each block part and the table (explicit ``pair``s)."""
 
     condim: int = 3  # sliding friction; the coefficient is the larger of the scene's peg and
@@ -78,8 +82,11 @@ class PhysicsProfile:
     peg_geom: str  # "mesh" (the 32-sided prism of the seed) or "cylinder" (primitive)
     hole_roundness: float | None  # max corner deviation from the nominal radius [m]; None: n_parts
     contact_margin: float | None  # block geoms' margin, added to the hole [m]; None: the assets'
-    pair: PairContact | None = None
-    multiccd: bool = False
+    pair: PegContactParams | None = None
+
+    def __post_init__(self) -> None:
+        if self.peg_geom not in ("mesh", "cylinder"):
+            raise ConfigError(f"peg_geom must be 'mesh' or 'cylinder', got {self.peg_geom!r}")
 
     def assets(self, params: AssetParams) -> AssetParams:
         """The geometry this profile builds for the requested ``params``: its margin, its hole."""
@@ -100,8 +107,6 @@ class PhysicsProfile:
         opt.noslip_iterations = self.noslip_iterations
         opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         opt.impratio = self.impratio
-        if self.multiccd:
-            opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
 
 
 def parts_for_roundness(inradius: float, tolerance: float) -> int:
@@ -144,28 +149,34 @@ PRECISION = PhysicsProfile(
     peg_geom="cylinder",
     hole_roundness=10e-6,
     contact_margin=0.0,
-    pair=PairContact(),
+    pair=PegContactParams(),
 )
 
 PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION)}
 
 
-def profile(name_or_profile: str | PhysicsProfile) -> PhysicsProfile:
-    """The profile called ``name`` (or the profile itself); an unknown name lists the known."""
+def profile(name_or_profile: str | PhysicsProfile, *, where: str = "physics.profile") -> PhysicsProfile:
+    """The profile called ``name`` (or the profile itself); an unknown name lists the known,
+    naming the field or flag ``where`` it came from."""
     if isinstance(name_or_profile, PhysicsProfile):
         return name_or_profile
     try:
         return PROFILES[name_or_profile]
     except KeyError:
-        raise UnknownComponent(
-            "physics profile", name_or_profile, PROFILES, where="physics.profile"
-        ) from None
+        raise UnknownComponent("physics profile", name_or_profile, PROFILES, where=where) from None
 
 
-def check_scene(name: str | PhysicsProfile, assets: AssetParams) -> None:
-    """Reject asset fields that the profile sets itself, rather than ignore them silently."""
+def check_scene(name: str | PhysicsProfile, scene: SceneConfig) -> None:
+    """Reject scene fields that the profile sets or that would override it, rather than let
+    them be ignored (or ignore the profile) silently."""
     prof = profile(name)
+    assets = scene.assets
     default = AssetParams()
+    if prof.pair is not None and scene.contact_override:
+        raise ConfigError(
+            f"scene.contact_override: would replace physics.profile={prof.name}'s contact "
+            "parameters with opt.o_solref/o_solimp; use it with physics.profile=seed"
+        )
     if prof.contact_margin is not None and assets.contact_margin != default.contact_margin:
         raise ConfigError(
             f"scene.assets.contact_margin: set by physics.profile={prof.name} "

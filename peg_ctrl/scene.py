@@ -102,7 +102,7 @@ class SceneConfig:
         return (self.peg_xy[0], self.peg_xy[1], self.assets.peg_radius)
 
 
-_TABLE_FRICTION = 1.0  # MuJoCo's default sliding friction; the table geom keeps it (SPEC is silent)
+TABLE_FRICTION = 1.0  # the table's sliding friction: MuJoCo's default (SPEC is silent)
 
 # 90 degrees about X: the peg's axis (local Z) lies along world -Y.
 PEG_LYING_QUAT = (np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0)
@@ -141,6 +141,7 @@ def _add_table(spec: mujoco.MjSpec) -> None:
     table.type = mujoco.mjtGeom.mjGEOM_PLANE
     table.size = [1.0, 1.0, 0.05]
     table.material = "table"
+    table.friction = [TABLE_FRICTION, 0.005, 0.0001]  # MuJoCo's default, stated (SPEC is silent)
     # Not given by SPEC; as stiff as the peg's own contact so a dropped peg does not sink in.
     table.solref = [0.005, 1.0]
     table.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
@@ -228,7 +229,7 @@ def _add_peg_pairs(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfil
     if c is None:
         return
     partners = [(part, max(cfg.peg_friction[0], cfg.block_friction[0])) for part in parts]
-    partners.append(("table", max(cfg.peg_friction[0], _TABLE_FRICTION)))
+    partners.append(("table", max(cfg.peg_friction[0], TABLE_FRICTION)))
     for body in ("block", "world"):  # the table is a world geom
         exclude = spec.add_exclude()
         exclude.bodyname1, exclude.bodyname2 = "peg", body

@@ -56,15 +56,21 @@ __all__ = [
     "penetration_case",
     "CLEARANCES",
     "INSERTED_DEPTH",
+    "LATERAL_RANGE",
+    "TILT_RANGE",
+    "PUSH_SPEED",
 ]
 
+INSERTED_DEPTH = 0.040  # a push "inserts" when the peg ends at least this deep [m]
+LATERAL_RANGE = 0.05e-3  # the clearance study's start lateral error: uniform within +- this [m]
+TILT_RANGE = math.radians(0.05)  # ... and its start tilt [rad]
 GRASP_OFFSET = 0.010  # peg axis from the pinch point along the fingers, as the task grasps [m]
 _CLOSE_TIME = 0.6  # jaw closing with the peg held in place [s]
 _SETTLE_TIME = 0.3  # peg free in the closed jaw before the push [s]
 _STEADY_WINDOW = 0.2  # the last seconds of the push over which steady values are taken [s]
 _KP_ROT, _KD_ROT = 400.0, 5.0  # ball-joint hold [N m/rad], [N m s/rad] (on top of joint damping)
 _KP_POS, _KD_POS = 3000.0, 50.0  # slide hold before the push [N/m], [N s/m]
-_PUSH_SPEED = 0.03  # quasi-static descent speed [m/s]
+PUSH_SPEED = 0.03  # quasi-static descent speed [m/s]
 _KV_PUSH = 2000.0  # descent speed gain [N s/m]; saturates at the push force in contact
 
 
@@ -116,7 +122,7 @@ class PushResult:
     wall_time_s: float  # of the push, including the measurements
     trace: NDArray[np.float64] | None = None  # (steps, 4): time [s], depth [m], force [N], overlap [m]
 
-    def inserted(self, depth: float = 0.04) -> bool:
+    def inserted(self, depth: float = INSERTED_DEPTH) -> bool:
         return self.depth >= depth
 
     @property
@@ -125,8 +131,11 @@ class PushResult:
 
     def summary(self) -> dict[str, float | int | str]:
         """Plain numbers for JSON (no trace)."""
-        out = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("case", "trace")}
+        out: dict[str, float | int | str] = {
+            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("case", "trace")
+        }
         out.update({f"case_{k}": v for k, v in dataclasses.asdict(self.case).items()})
+        out["us_per_step"] = self.us_per_step
         return out
 
 
@@ -200,10 +209,10 @@ class _Rig:
                 err = p_ref[k] - data.qpos[self.slide_qpos[k]]
                 data.ctrl[act] = _KP_POS * err - _KD_POS * data.qvel[dof] + bias[dof]
             elif k == 2:
-                # Down at up to _PUSH_SPEED, with at most ``push`` newtons: the force saturates
+                # Down at up to PUSH_SPEED, with at most ``push`` newtons: the force saturates
                 # in contact. The slide's own damping is cancelled so the force is the push.
                 down = -data.qvel[dof]
-                f = min(push, max(0.0, _KV_PUSH * (_PUSH_SPEED - down)))
+                f = min(push, max(0.0, _KV_PUSH * (PUSH_SPEED - down)))
                 data.ctrl[act] = bias[dof] - data.qfrc_passive[dof] - f
             else:
                 data.ctrl[act] = bias[dof]
@@ -271,7 +280,7 @@ def _initial_state(
 
 def held_push(
     case: PushCase,
-    physics: str | PhysicsProfile = "precision",
+    physics: str | PhysicsProfile,
     *,
     scene: SceneConfig | None = None,
     model: mujoco.MjModel | None = None,
@@ -357,7 +366,6 @@ def held_push(
 
 # -- the standard battery -------------------------------------------------------------------------
 CLEARANCES = (0.25e-3, 0.1e-3, 0.05e-3, 0.02e-3, 0.0, -0.02e-3)  # radial [m]
-INSERTED_DEPTH = 0.040  # a push "inserts" when the peg ends at least this deep [m]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -372,7 +380,7 @@ class Trial:
 
     @property
     def inserted(self) -> bool:
-        return self.result.inserted(INSERTED_DEPTH)
+        return self.result.inserted()
 
 
 def clearance_study(
@@ -381,15 +389,15 @@ def clearance_study(
     *,
     trials: int = 10,
     seed: int = 0,
-    lateral_range: float = 0.05e-3,
-    tilt_range: float = math.radians(0.05),
+    lateral_range: float = LATERAL_RANGE,
+    tilt_range: float = TILT_RANGE,
     on_result: Callable[[Trial], None] | None = None,
 ) -> list[Trial]:
     """Held pushes at each clearance: ``trials`` runs with the start's lateral error and tilt
     drawn uniformly within ``±lateral_range`` [m] and ``±tilt_range`` [rad] (trial 0 is exact).
 
     A real fixture places a part to a few hundredths of a millimetre and a fraction of a degree;
-    the spread turns the outcome at each clearance into a rate.
+    the spread turns the outcome at each clearance into a rate. Trial 0 keeps its trace.
     """
     prof = profile(physics)
     rng = np.random.default_rng(seed)
@@ -403,7 +411,7 @@ def clearance_study(
         model = build_model(dataclasses.replace(SceneConfig(), assets=case0.assets()), prof)
         for i, (e, tilt) in enumerate(draws):
             case = dataclasses.replace(case0, lateral_error=e, tilt=tilt)
-            trial = Trial(c, i, e, tilt, held_push(case, prof, model=model))
+            trial = Trial(c, i, e, tilt, held_push(case, prof, model=model, trace=i == 0))
             out.append(trial)
             if on_result is not None:
                 on_result(trial)

@@ -18,7 +18,7 @@ from peg_ctrl.cli import main
 from peg_ctrl.errors import DivergenceError
 from peg_ctrl.teleop_window import WindowUnavailable
 
-SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep"]
+SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep", "validity", "plot"]
 
 
 @pytest.mark.parametrize("command", SUBCOMMANDS)

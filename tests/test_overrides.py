@@ -48,6 +48,17 @@ def test_the_last_assignment_wins() -> None:
     assert apply_overrides({"seed": 1}, ["seed=2", "seed=5"]) == {"seed": 5}
 
 
+def test_config_files_read_exponents_as_numbers(tmp_path: Path) -> None:
+    from peg_ctrl.config import read_mapping
+
+    (tmp_path / "c.yaml").write_text("scene: {assets: {clearance: 5e-5}}\ngains: [1e3, 2E+2]\nname: 1e3x\n")
+    assert read_mapping(tmp_path / "c.yaml") == {
+        "scene": {"assets": {"clearance": 5e-5}},
+        "gains": [1000.0, 200.0],
+        "name": "1e3x",
+    }
+
+
 @pytest.mark.parametrize(
     "text, value, kind",
     [
@@ -58,6 +69,8 @@ def test_the_last_assignment_wins() -> None:
         ("3", 3, int),
         ("true", True, bool),
         ("[0.1, 0.2]", [0.1, 0.2], list),
+        ("[1e3, 2e-5]", [1000.0, 2e-5], list),  # exponents inside lists and mappings too
+        ("{a: 5e-5}", {"a": 5e-5}, dict),
         ("precision", "precision", str),
     ],
 )
@@ -115,9 +128,9 @@ def exported(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     if request.param == "set":
         options = [arg for item in PRECISION_SETTINGS for arg in ("--set", item)]
     else:
-        # 5.0e-5, not 5e-5: a YAML file is plain YAML 1.1, which reads 5e-5 as a string.
+        # 5e-5 without a dot: config files read it as a number (plain YAML 1.1 would not).
         (work / "precision.yaml").write_text(
-            "physics: {profile: precision}\nscene:\n  assets: {clearance: 5.0e-5}\n"
+            "physics: {profile: precision}\nscene:\n  assets: {clearance: 5e-5}\n"
         )
         options = ["--config", "precision.yaml"]
     proc = _peg_sim(["model", "--out", "scene", *options], cwd=work)
@@ -184,6 +197,22 @@ def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp
         (["run", "--set", "physics.profile=nope", "--out", "X"], "physics.profile"),
         (["sweep", "quick", "--set", "physics.profile=nope", "--out", "X"], "physics.profile"),
         (["sweep", "quick", "--set", "clearances=[-0.002]", "--out", "X"], "clearances[0]"),
+        (
+            [
+                "run",
+                "--set",
+                "physics.profile=precision",
+                "--set",
+                "scene.contact_override=true",
+                "--out",
+                "X",
+            ],
+            "scene.contact_override",
+        ),
+        (["run", "--set", "seed=[1, 2", "--out", "X"], "--set seed: value '[1, 2' is not valid YAML"),
+        (["validity", "--seed", "-1", "--out", "X"], "--seed must be >= 0, got -1"),
+        (["validity", "--profile", "exact", "--out", "X"], "--profile: unknown physics profile 'exact'"),
+        (["bench", "--physics", "--sweep", "--out", "X"], "--physics and --sweep"),
     ],
 )
 def test_bad_run_and_sweep_overrides_are_one_line_with_exit_2(

@@ -188,15 +188,41 @@ def test_precision_rejects_asset_fields_it_sets_itself(assets: AssetParams, fiel
     with pytest.raises(ConfigError, match=field):
         EpisodeConfig(physics=PhysicsConfig("precision"), scene=SceneConfig(assets=assets))
     with pytest.raises(ConfigError, match=field):
-        check_scene("precision", assets)
+        check_scene("precision", SceneConfig(assets=assets))
     # The seed profile takes them.
     cfg = EpisodeConfig(physics=PhysicsConfig("seed"), scene=SceneConfig(assets=assets))
     assert cfg.scene.assets == assets
 
 
+def test_precision_rejects_the_contact_override() -> None:
+    """MuJoCo's override flag would replace the precision pairs' parameters with o_solref/o_solimp."""
+    with pytest.raises(ConfigError, match=r"^scene\.contact_override: "):
+        EpisodeConfig(physics=PhysicsConfig("precision"), scene=SceneConfig(contact_override=True))
+    assert EpisodeConfig(scene=SceneConfig(contact_override=True)).scene.contact_override
+
+
+def test_episode_and_experiment_configs_round_trip_with_physics() -> None:
+    import json
+
+    from peg_ctrl.config import load, to_dict
+    from peg_ctrl.experiments.config import expand, experiment_from_mapping
+
+    cfg = EpisodeConfig(physics=PhysicsConfig("precision"), max_steps=None)
+    again = load(EpisodeConfig, json.loads(json.dumps(to_dict(cfg))))
+    assert again == cfg and again.max_steps is None and again.physics.profile == "precision"
+    data = {"controllers": ["pd"], "seeds": 2, "physics": {"profile": "precision"}}
+    exp = experiment_from_mapping(data)
+    assert experiment_from_mapping(json.loads(json.dumps(to_dict(exp)))) == exp
+    jobs = expand(exp)
+    assert [j.key for j in jobs] == [j.key for j in expand(experiment_from_mapping(data))]  # stable keys
+    assert all(j.config.physics.profile == "precision" for j in jobs)
+    seed_keys = {j.key for j in expand(experiment_from_mapping({"controllers": ["pd"], "seeds": 2}))}
+    assert seed_keys.isdisjoint(j.key for j in jobs)  # the profile is part of an episode's identity
+
+
 def test_unknown_profile_lists_the_known() -> None:
     with pytest.raises(ConfigError, match="precision, seed") as exc:
-        check_scene("precise", AssetParams())
+        check_scene("precise", SceneConfig())
     assert "'precise'" in str(exc.value)
     with pytest.raises(ConfigError, match=r"^physics\.profile: .*precision, seed"):
         PhysicsConfig("nope")
