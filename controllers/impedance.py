@@ -24,6 +24,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort, InvalidField
 from peg_ctrl.controllers.dynamics import BaseDynamics
 from peg_ctrl.jaw import JawCalibration
+from peg_ctrl.rotations import rotate
 from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS
 from peg_ctrl.state import ControlState
 
@@ -89,14 +90,8 @@ class ImpedanceController(ControllerBase[ImpedanceConfig]):
         wrench += self._d * de
         jac = self.dynamics.pinch_jacobian(state.p_world, state.quat_world)
         # J maps (v, omega_body) to world twist; the angular rows act on body rates through R.
-        tau = jac.T @ np.concatenate([wrench[:3], _rotate(state.quat_world, wrench[3:])])
+        tau = jac.T @ np.concatenate([wrench[:3], rotate(state.quat_world, wrench[3:])])
         qd_ref = np.concatenate([target.v_world, target.omega_body])
         tau += self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
         tau += self._b * qd_ref
         return Effort(tau[:3].tolist(), tau[3:].tolist())
-
-
-def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
-    out = np.empty(3)
-    mujoco.mju_rotVecQuat(out, v, quat)
-    return out

@@ -31,6 +31,7 @@ from peg_ctrl.assets import AssetParams
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.jaw import load_default
 from peg_ctrl.physics import PhysicsProfile, profile
+from peg_ctrl.rotations import quat_mul, rotate
 from peg_ctrl.scene import (
     BALL_ACTUATORS,
     BALL_JOINT,
@@ -162,18 +163,6 @@ def wedging_tilt(clearance: float, depth: float, radius: float = 0.010) -> float
     return 0.5 * (lo + hi)
 
 
-def _quat_mul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    out = np.empty(4)
-    mujoco.mju_mulQuat(out, a, b)
-    return out
-
-
-def _rotate(q: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    out = np.empty(3)
-    mujoco.mju_rotVecQuat(out, v, q)
-    return out
-
-
 class _Rig:
     """Indices and the hold controller of the pushing gripper."""
 
@@ -256,18 +245,18 @@ def _initial_state(
     """Gripper and peg poses for the case; returns the gripper's (position, orientation) target."""
     q_turn = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])  # 90 deg about X
     q_tilt = np.array([math.cos(case.tilt / 2), 0.0, math.sin(case.tilt / 2), 0.0])  # about Y
-    q_grip = _quat_mul(q_tilt, q_turn)
-    q_peg = _quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
+    q_grip = quat_mul(q_tilt, q_turn)
+    q_peg = quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
     half = 0.5 * scene.assets.peg_length
     # The lower end: along the peg's local axis, whichever end points down.
-    axis = _rotate(q_peg, np.array([0.0, 0.0, 1.0]))
+    axis = rotate(q_peg, np.array([0.0, 0.0, 1.0]))
     lower_local = -half if axis[2] > 0 else half
     hx, hy = scene.hole_xy
     top = scene.assets.block_size[2]
     bottom = np.array([hx + case.lateral_error, hy, top + case.start_height])
-    peg_centre = bottom - _rotate(q_peg, np.array([0.0, 0.0, lower_local]))
+    peg_centre = bottom - rotate(q_peg, np.array([0.0, 0.0, lower_local]))
     up = axis if axis[2] > 0 else -axis
-    pinch = peg_centre + case.grip_above_centre * up - _rotate(q_grip, np.array([0.0, 0.0, -GRASP_OFFSET]))
+    pinch = peg_centre + case.grip_above_centre * up - rotate(q_grip, np.array([0.0, 0.0, -GRASP_OFFSET]))
     mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
     data.qpos[rig.slide_qpos] = pinch
     data.qpos[rig.ball_qpos : rig.ball_qpos + 4] = q_grip

@@ -177,13 +177,27 @@ def _markdown(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plot_clearance(path: Path, study: dict[str, list[Trial]]) -> None:
-    import io
-
+def _pyplot():  # type: ignore[no-untyped-def]
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save_png(fig, path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Write ``fig`` to ``path`` atomically (no torn PNG if interrupted) and close it."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    _pyplot().close(fig)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _plot_clearance(path: Path, study: dict[str, list[Trial]]) -> None:
+    plt = _pyplot()
 
     fig, (ax_rate, ax_depth) = plt.subplots(1, 2, figsize=(11, 4.2))
     for (name, trials), marker in zip(study.items(), "os^", strict=False):
@@ -204,20 +218,12 @@ def _plot_clearance(path: Path, study: dict[str, list[Trial]]) -> None:
     ax_depth.axhline(INSERTED_DEPTH * 1e3, color="0.6", lw=0.8, ls="--")
     fig.suptitle("Held peg pushed with 10 N: outcome against clearance")
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    _save_png(fig, path)
 
 
 def _plot_force_depth(path: Path, study: dict[str, list[Trial]]) -> None:
     """Contact force against depth for the exact push (trial 0, traced) at each clearance."""
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, axes = plt.subplots(1, len(study), figsize=(5.5 * len(study), 4.2), squeeze=False)
     for ax, (name, trials) in zip(axes[0], study.items(), strict=True):
@@ -233,7 +239,4 @@ def _plot_force_depth(path: Path, study: dict[str, list[Trial]]) -> None:
         ax.grid(alpha=0.3)
         ax.legend(title="clearance", fontsize=8)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    _save_png(fig, path)

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -54,3 +57,16 @@ def target(p, quat=IDENTITY, *, jaw: float = 0.085, v=(0.0, 0.0, 0.0), w=(0.0, 0
         v_world=np.asarray(v, dtype=float),
         omega_body=np.asarray(w, dtype=float),
     )
+
+
+def peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``peg-sim ARGV`` in a fresh interpreter, run in ``cwd``."""
+    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) -> None:
+    """A user or OS mistake: exit 2 and one ``peg-sim: error: ...`` line containing ``message``."""
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("peg-sim: error: ") and message in lines[0], lines[0]

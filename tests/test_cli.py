@@ -18,6 +18,8 @@ from peg_ctrl.cli import main
 from peg_ctrl.errors import DivergenceError
 from peg_ctrl.teleop_window import WindowUnavailable
 
+from .conftest import assert_one_line_error, peg_sim
+
 SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep", "validity", "plot"]
 
 
@@ -97,27 +99,16 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
     ],
 )
 def test_user_errors_are_one_line_with_exit_2(argv, message, tmp_path: Path) -> None:
-    _assert_one_line_error(_peg_sim(argv, cwd=tmp_path), message)
+    assert_one_line_error(peg_sim(argv, cwd=tmp_path), message)
     assert list(tmp_path.iterdir()) == [], "bad input must be rejected before any output is created"
-
-
-def _peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
-
-
-def _assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) -> None:
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("peg-sim: error: ") and message in lines[0], lines[0]
 
 
 @pytest.mark.parametrize("command", ["run", "model", "teleop --scripted", "sweep quick"])
 def test_out_that_is_a_regular_file_is_one_line_with_exit_2(command: str, tmp_path: Path) -> None:
     target = tmp_path / "results"
     target.write_text("not a directory")
-    proc = _peg_sim([*command.split(), "--out", str(target)], cwd=tmp_path)
-    _assert_one_line_error(proc, f"output directory {str(target)!r} is not a directory")
+    proc = peg_sim([*command.split(), "--out", str(target)], cwd=tmp_path)
+    assert_one_line_error(proc, f"output directory {str(target)!r} is not a directory")
     assert target.read_text() == "not a directory"
 
 
@@ -133,7 +124,7 @@ def test_out_that_is_a_regular_file_is_one_line_with_exit_2(command: str, tmp_pa
 def test_out_under_a_file_is_one_line_with_exit_2(argv: list[str], tmp_path: Path) -> None:
     (tmp_path / "file").write_text("")
     argv = [a.format(file=tmp_path / "file") for a in argv]
-    _assert_one_line_error(_peg_sim(argv, cwd=tmp_path), f"its parent {str(tmp_path / 'file')!r} is a file")
+    assert_one_line_error(peg_sim(argv, cwd=tmp_path), f"its parent {str(tmp_path / 'file')!r} is a file")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root can write to read-only directories")
@@ -143,14 +134,14 @@ def test_read_only_out_is_one_line_with_exit_2(command: str, tmp_path: Path) -> 
     ro.mkdir()
     ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
     try:
-        _assert_one_line_error(_peg_sim([command, "--out", str(ro)], cwd=tmp_path), "is not writable")
+        assert_one_line_error(peg_sim([command, "--out", str(ro)], cwd=tmp_path), "is not writable")
     finally:
         ro.chmod(stat.S_IRWXU)
 
 
 def test_bench_out_that_is_a_directory_is_rejected(tmp_path: Path) -> None:
-    _assert_one_line_error(
-        _peg_sim(["bench", "--controller", "pd", "--out", str(tmp_path)], cwd=tmp_path), "is a directory"
+    assert_one_line_error(
+        peg_sim(["bench", "--controller", "pd", "--out", str(tmp_path)], cwd=tmp_path), "is a directory"
     )
 
 

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +12,8 @@ import pytest
 
 from peg_ctrl.config import apply_overrides, parse_value
 from peg_ctrl.errors import ConfigError
+
+from .conftest import assert_one_line_error, peg_sim
 
 PRECISION_SETTINGS = ["physics.profile=precision", "scene.assets.clearance=5e-5"]
 
@@ -99,17 +99,6 @@ def test_invalid_yaml_value_is_a_config_error() -> None:
 # --- the command line --------------------------------------------------------------------------
 
 
-def _peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
-
-
-def _assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) -> None:
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("peg-sim: error: ") and message in lines[0], lines[0]
-
-
 @pytest.fixture(scope="module")
 def study_model() -> mujoco.MjModel:
     """The model a study with the precision settings runs."""
@@ -133,7 +122,7 @@ def exported(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
             "physics: {profile: precision}\nscene:\n  assets: {clearance: 5e-5}\n"
         )
         options = ["--config", "precision.yaml"]
-    proc = _peg_sim(["model", "--out", "scene", *options], cwd=work)
+    proc = peg_sim(["model", "--out", "scene", *options], cwd=work)
     assert proc.returncode == 0, proc.stderr
     return mujoco.MjModel.from_xml_path(str(work / "scene" / "scene.xml"))
 
@@ -187,7 +176,7 @@ def test_exported_solver_options_are_the_study_ones(
     ],
 )
 def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp_path: Path) -> None:
-    _assert_one_line_error(_peg_sim(["model", "--out", "X", "--set", item], cwd=tmp_path), message)
+    assert_one_line_error(peg_sim(["model", "--out", "X", "--set", item], cwd=tmp_path), message)
     assert not (tmp_path / "X").exists(), "bad input must be rejected before any output is created"
 
 
@@ -218,5 +207,5 @@ def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp
 def test_bad_run_and_sweep_overrides_are_one_line_with_exit_2(
     argv: list[str], message: str, tmp_path: Path
 ) -> None:
-    _assert_one_line_error(_peg_sim(argv, cwd=tmp_path), message)
+    assert_one_line_error(peg_sim(argv, cwd=tmp_path), message)
     assert not (tmp_path / "X").exists()

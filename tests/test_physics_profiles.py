@@ -65,14 +65,7 @@ def _flat_distance(corners: np.ndarray) -> float:
 # --- seed --------------------------------------------------------------------------------------
 
 
-def test_seed_profile_keeps_the_spec_solver_options(model: mujoco.MjModel) -> None:
-    opt = model.opt
-    assert opt.timestep == 0.001
-    assert opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
-    assert opt.solver == mujoco.mjtSolver.mjSOL_CG
-    assert opt.noslip_iterations == 20
-    assert opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-    assert opt.impratio == 10.0
+# The seed's solver options are asserted in tests/test_scene.py::test_physics_options.
 
 
 def test_seed_profile_keeps_the_spec_contact_model(model: mujoco.MjModel) -> None:

@@ -41,6 +41,7 @@ from peg_ctrl.errors import ConfigError, EpisodeFailure
 from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
+from peg_ctrl.rotations import quat_mul, rotate_inv
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
@@ -141,29 +142,13 @@ def initial_qpos(
         dx, dy = rng.uniform(-randomization.peg_xy, randomization.peg_xy, size=2)
         yaw = float(rng.uniform(-randomization.peg_yaw, randomization.peg_yaw))
         x, y = x + dx, y + dy
-    q = np.empty(4)
-    mujoco.mju_mulQuat(q, _yaw_quat(yaw), np.asarray(PEG_LYING_QUAT))
     qpos[adr : adr + 3] = [x, y, scene.assets.peg_radius]
-    qpos[adr + 3 : adr + 7] = q
+    qpos[adr + 3 : adr + 7] = quat_mul(_yaw_quat(yaw), np.asarray(PEG_LYING_QUAT))
     return qpos
 
 
 def _yaw_quat(yaw: float) -> NDArray[np.float64]:
     return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
-
-
-def _mul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    out = np.empty(4)
-    mujoco.mju_mulQuat(out, a, b)
-    return out
-
-
-def _rotate_inv(quat: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    q_inv = np.empty(4)
-    mujoco.mju_negQuat(q_inv, quat)
-    out = np.empty(3)
-    mujoco.mju_rotVecQuat(out, v, q_inv)
-    return out
 
 
 class PickAndPlaceTask:
@@ -327,7 +312,7 @@ class PickAndPlaceTask:
     def _enter_rotate(self, obs: Observation) -> Motion:
         g = self._goal
         return self._move(
-            Waypoint.of(g.p_world, _mul(np.asarray(g.quat_world), self._turn(obs)), g.jaw_sep_m)
+            Waypoint.of(g.p_world, quat_mul(np.asarray(g.quat_world), self._turn(obs)), g.jaw_sep_m)
         )
 
     def _enter_align(self, obs: Observation) -> Motion:
@@ -370,7 +355,7 @@ class PickAndPlaceTask:
         if self.cfg.turn_angle is not None:
             angle = self.cfg.turn_angle
         else:
-            b = _rotate_inv(obs.gripper.quat_world, obs.peg.axis_world)  # peg axis in the gripper frame
+            b = rotate_inv(obs.gripper.quat_world, obs.peg.axis_world)  # peg axis in the gripper frame
             angle = math.atan2(b[1], b[2])
             if angle < 0.0:
                 angle += math.pi  # either end may go down; turn the positive way

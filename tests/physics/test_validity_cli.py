@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,9 +10,7 @@ import pytest
 from peg_ctrl.bench import bench_profiles
 from peg_ctrl.validity import CLEARANCES
 
-
-def _peg_sim(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
+from ..conftest import assert_one_line_error, peg_sim
 
 
 @pytest.mark.parametrize(
@@ -26,16 +22,13 @@ def _peg_sim(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     ],
 )
 def test_bad_validity_arguments_fail_in_one_line(tmp_path: Path, argv: list[str], message: str) -> None:
-    proc = _peg_sim([*argv, "--out", "v"], tmp_path)
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("peg-sim: error: ") and message in lines[0], lines
+    assert_one_line_error(peg_sim([*argv, "--out", "v"], cwd=tmp_path), message)
     assert not (tmp_path / "v").exists()
 
 
 @pytest.mark.slow
 def test_validity_battery_writes_its_tables_and_plots(tmp_path: Path) -> None:
-    proc = _peg_sim(["validity", "--profile", "precision", "--trials", "1", "--out", "v"], tmp_path)
+    proc = peg_sim(["validity", "--profile", "precision", "--trials", "1", "--out", "v"], cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = tmp_path / "v"
     data = json.loads((out / "validity.json").read_text())
