@@ -42,6 +42,7 @@ from peg_ctrl.scene import (
     SLIDE_JOINTS,
     SceneConfig,
     build_model,
+    contact_sensor_name,
 )
 
 __all__ = [
@@ -179,9 +180,9 @@ class _Rig:
         self.peg_qpos = model.joint("peg_free").qposadr[0]
         self.peg_dof = model.joint("peg_free").dofadr[0]
         self.pad = model.body(GRIPPER_PREFIX + "left_pad").id
-        block = model.body("block").id
-        self.block_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] == block}
-        self.peg_geom = model.geom("peg").id
+        # Layouts: force sensor (found, fx, fy, fz); distance sensor (found, closest distance).
+        self.force_adr = int(model.sensor(contact_sensor_name("force", "block", "peg")).adr[0])
+        self.dist_adr = int(model.sensor(contact_sensor_name("dist", "block", "peg")).adr[0])
 
     def control(
         self,
@@ -216,27 +217,17 @@ class _Rig:
     def peg_in_pad(self, data: mujoco.MjData) -> NDArray[np.float64]:
         return data.xmat[self.pad].reshape(3, 3).T @ (data.xpos[self.peg] - data.xpos[self.pad])
 
-    def peg_block_contact(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple[float, float, float]:
+    def peg_block_contact(self, data: mujoco.MjData) -> tuple[float, float, float]:
         """Net peg-block contact force magnitude [N], the deepest true overlap [m] (>= 0) and
-        the closest surface distance [m] among active contacts (nan if none)."""
-        total = np.zeros(3)
-        overlap = 0.0
-        closest = math.nan
-        f6 = np.empty(6)
-        for i in range(data.ncon):
-            c = data.contact[i]
-            g1, g2 = c.geom1, c.geom2
-            if not (
-                (g1 == self.peg_geom and g2 in self.block_geoms)
-                or (g2 == self.peg_geom and g1 in self.block_geoms)
-            ):
-                continue
-            if c.efc_address >= 0:
-                mujoco.mj_contactForce(model, data, i, f6)
-                total += c.frame.reshape(3, 3).T @ f6[:3]
-            overlap = max(overlap, -c.dist)
-            closest = c.dist if math.isnan(closest) else min(closest, c.dist)
-        return float(np.linalg.norm(total)), overlap, closest
+        the closest surface distance [m] among the contacts (nan if none), from the scene's
+        peg-block contact sensors."""
+        sd = data.sensordata
+        f = self.force_adr
+        force = math.sqrt(sd[f + 1] ** 2 + sd[f + 2] ** 2 + sd[f + 3] ** 2)
+        if sd[self.dist_adr] <= 0.0:  # no peg-block contact
+            return force, 0.0, math.nan
+        closest = float(sd[self.dist_adr + 1])
+        return force, max(0.0, -closest), closest
 
 
 def _initial_state(
@@ -316,7 +307,7 @@ def held_push(
     for step in range(n_push):
         rig.control(data, pinch, q_grip, case.force)
         mujoco.mj_step(model, data)
-        force, pen, dist = rig.peg_block_contact(model, data)
+        force, pen, dist = rig.peg_block_contact(data)
         z = min(data.site_xpos[lower[0], 2], data.site_xpos[lower[1], 2])
         depth = top - z
         max_depth = max(max_depth, depth)
