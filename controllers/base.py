@@ -144,12 +144,14 @@ def check_target(target: GripperTarget) -> None:
         + float(target.v_world.sum())
         + float(target.omega_body.sum())
         + float(target.jaw_sep_m)
+        + float(target.force_world.sum())
     )
     if not math.isfinite(total):  # a NaN or inf anywhere makes the sum non-finite
         raise CommandError(
             f"target must be finite, got p_world={target.p_world.tolist()}, "
             f"quat_world={target.quat_world.tolist()}, v_world={target.v_world.tolist()}, "
-            f"omega_body={target.omega_body.tolist()}, jaw_sep_m={target.jaw_sep_m}"
+            f"omega_body={target.omega_body.tolist()}, jaw_sep_m={target.jaw_sep_m}, "
+            f"force_world={target.force_world.tolist()}"
         )
 
 
@@ -213,16 +215,30 @@ class ControllerConfig:
 
     name: ClassVar[str]
     GAINS: ClassVar[tuple[str, ...]] = ()
+    VECTORS: ClassVar[tuple[str, ...]] = ()  # 3-vector fields of any sign (points, offsets) [m]
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ()  # number fields that may be 0
     control_dt: float = 0.001  # control period [s], a whole multiple of the physics timestep
 
     def __post_init__(self) -> None:
         numeric = []
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, (bool, str, ControllerConfig)):
+            if isinstance(value, (bool, str, ControllerConfig)) or f.name in self.VECTORS:
+                continue
+            if f.name in self.NON_NEGATIVE:
+                if not (_is_number(value) and math.isfinite(value) and value >= 0):
+                    raise InvalidField(self.name, f.name, f"must be finite and >= 0, got {value!r}")
                 continue
             numeric.append(f.name)
         check_positive(self, numeric)
+        for field in self.VECTORS:
+            value = getattr(self, field)
+            if not (
+                isinstance(value, tuple)
+                and len(value) == 3
+                and all(_is_number(v) and math.isfinite(v) for v in value)
+            ):
+                raise InvalidField(self.name, field, f"must be 3 finite numbers, got {value!r}")
 
     def build(self, model: mujoco.MjModel) -> Controller:
         """The controller this config describes, for ``model``."""

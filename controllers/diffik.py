@@ -10,6 +10,9 @@ mink runs on the robot-only model (base stack + gripper, fingers held open); the
 unlimited (mink's configuration limit would otherwise treat its range as a total-angle bound).
 Limits are built once, not per call.
 
+Force-controlled axes (a non-zero ``target.force_world`` entry) are handed to the inner PD, which
+pushes with the commanded force open loop along them (see :mod:`peg_ctrl.controllers.pd`).
+
 The inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
 IK costs by :meth:`~peg_ctrl.controllers.base.ControllerConfig.scaled`); it runs at the
 controller's ``control_dt`` (``inner.control_dt`` is replaced by it), and only its control law
@@ -153,7 +156,7 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
             self._q = self.configuration.integrate(self._v, self.config.ik_dt)
         self._count += 1
         setpoint = GripperTarget.trusted(
-            self._q[:3], self._q[3:7], self._v[:3], self._v[3:6], target.jaw_sep_m
+            self._q[:3], self._q[3:7], self._v[:3], self._v[3:6], target.jaw_sep_m, target.force_world
         )
         effort = self.inner.control_law(state, setpoint)
         return Effort(effort.force_world, effort.torque_body, status, 1 if status == "ok" else 0)

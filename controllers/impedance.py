@@ -1,13 +1,26 @@
-"""Task-space impedance control of the pinch point, with Pinocchio bias compensation.
+"""Task-space impedance control about a centre of compliance, with Pinocchio bias compensation.
 
-    F   = K_p (p_d - p) + D_p (v_d - v)                       (world frame) [N]
-    tau = K_r Log(q^-1 q_d) + D_r (omega_d - omega)           (gripper frame) [N m]
-    u   = J^T [F; tau] + b(q, qdot) + B qdot_d
+The spring acts on the point ``c`` fixed in the gripper frame (``compliance_center``; the pinch
+point by default, the held peg's tip for a remote centre of compliance, RCC)::
+
+    F     = K_p (c_d - c) + D_p (dc_d - dc)                   (world frame) [N], applied at c
+    tau   = K_r Log(q^-1 q_d) + D_r (omega_d - omega)         (gripper frame) [N m]
+    u     = J^T [F; R tau + r x F] + b(q, qdot) + B qdot_d     (r: c relative to the pinch point)
+
+so a force at the peg tip translates the peg without turning it, and a moment about the tip turns
+it about the tip with the rotational stiffness ``K_r``: a low ``k_rot`` with the centre at the
+tip lets a tilted peg align with the hole as it is pushed in.
+
+Force-controlled axes (a non-zero ``target.force_world`` entry): the spring term of ``F`` along
+the axis is replaced by the commanded force (implicit force control, open loop).
 
 ``K`` per axis; ``D = 2 zeta sqrt(K m)`` from a damping ratio and the apparent mass/inertia at the
 pinch point (Pinocchio's mass matrix at the home pose). ``b`` are gravity and Coriolis forces
 from the Pinocchio model of the base + gripper, ``B qdot_d`` cancels the joints' own damping
-along the reference only (so the impedance about the reference is what is commanded). The pinch
+along the reference only (so the impedance about the reference is what is commanded);
+``damping_compensation`` cancels that fraction of it along the measured motion as well, so a
+compliant wrist is not held back by its joints' damping (the viscous load of a real wrist's
+gearing, which a torque-controlled arm compensates the same way). The pinch
 point is the ball joint's centre, so ``J`` is the identity in these coordinates; it is still
 taken from Pinocchio and checked in the tests.
 """
@@ -37,13 +50,21 @@ class ImpedanceConfig(ControllerConfig):
 
     name: ClassVar[str] = "impedance"
     GAINS: ClassVar[tuple[str, ...]] = ("k_pos", "k_rot")
+    VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("damping_compensation",)
     k_pos: tuple[float, float, float] = (1500.0, 1500.0, 1500.0)  # translational stiffness [N/m]
     k_rot: tuple[float, float, float] = (120.0, 120.0, 120.0)  # rotational stiffness [N m/rad]
     damping_ratio: float = 1.0  # zeta of D = 2 zeta sqrt(K m)
     v_max: float = 0.5  # caps |K_p e| at the force that drives the damped slide at v_max [m/s]
+    compliance_center: tuple[float, float, float] = (0.0, 0.0, 0.0)  # gripper frame [m]
+    damping_compensation: float = 0.0  # fraction of the joints' own damping cancelled, in [0, 1)
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if not self.damping_compensation < 1.0:
+            raise InvalidField(
+                self.name, "damping_compensation", f"must be in [0, 1), got {self.damping_compensation!r}"
+            )
         for field in ("k_pos", "k_rot"):
             if len(getattr(self, field)) != 3:
                 raise InvalidField(self.name, field, f"must hold 3 values, got {getattr(self, field)!r}")
@@ -76,22 +97,41 @@ class ImpedanceController(ControllerBase[ImpedanceConfig]):
         self._d = 2.0 * self.config.damping_ratio * np.sqrt(k * apparent)
         self._cap = (self._b[0] + self._d[0]) * self.config.v_max
         self._err = np.zeros(3)
+        self._centre = np.asarray(self.config.compliance_center, dtype=float)
 
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+        q, q_d = state.quat_world, target.quat_world
+        r = rotate(q, self._centre)  # the centre relative to the pinch point, world [m]
+        r_d = rotate(q_d, self._centre)
+        omega = rotate(q, state.omega_body)
+        omega_d = rotate(q_d, target.omega_body)
         e = np.empty(6)
-        e[:3] = target.p_world - state.p_world
-        mujoco.mju_subQuat(self._err, target.quat_world, state.quat_world)
+        e[:3] = (target.p_world + r_d) - (state.p_world + r)
+        mujoco.mju_subQuat(self._err, q_d, q)
         e[3:] = self._err
-        de = np.concatenate([target.v_world - state.v_world, target.omega_body - state.omega_body])
+        de = np.empty(6)
+        de[:3] = (target.v_world + np.cross(omega_d, r_d)) - (state.v_world + np.cross(omega, r))
+        de[3:] = target.omega_body - state.omega_body
         wrench = self._k * e
+        f = np.asarray(target.force_world)
+        forced = f != 0.0
+        if target.force_controlled:  # the position error along a force-controlled axis is ignored
+            wrench[:3][forced] = 0.0
         norm = float(np.linalg.norm(wrench[:3]))
         if norm > self._cap:
             wrench[:3] *= self._cap / norm
+        if target.force_controlled:
+            wrench[:3][forced] = f[forced]
         wrench += self._d * de
-        jac = self.dynamics.pinch_jacobian(state.p_world, state.quat_world)
+        force = wrench[:3]
+        torque = rotate(q, wrench[3:]) + np.cross(r, force)  # about the pinch point, world
+        jac = self.dynamics.pinch_jacobian(state.p_world, q)
         # J maps (v, omega_body) to world twist; the angular rows act on body rates through R.
-        tau = jac.T @ np.concatenate([wrench[:3], rotate(state.quat_world, wrench[3:])])
+        tau = jac.T @ np.concatenate([force, torque])
         qd_ref = np.concatenate([target.v_world, target.omega_body])
-        tau += self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
+        tau += self.dynamics.bias(state.p_world, q, state.v_world, state.omega_body)
         tau += self._b * qd_ref
+        c = self.config.damping_compensation
+        if c > 0.0:  # cancel part of the joints' damping along the measured motion
+            tau += c * self._b * (np.concatenate([state.v_world, state.omega_body]) - qd_ref)
         return Effort(tau[:3].tolist(), tau[3:].tolist())

@@ -12,10 +12,20 @@ velocity over the horizon; with the feed-forward ``u_ff = b v_ref`` the tracking
     sum_k z_k' Q z_k + du_k' R du_k  +  z_N' P z_N        (P: the DARE solution, so the
                                                           unconstrained optimum is LQR)
 
-subject to the actuator range on ``u_ff + du`` and a box on the velocity. Its Hessian and
-constraint matrix are constant: CasADi's ``conic`` interface is built once and re-solved with
-new linear terms and bounds, warm-started from the previous solution. Default solver qpOASES
-(``osqp`` selectable). Runs every ``mpc_dt`` (default 10 ms, 100 Hz), zero-order hold between.
+subject to the actuator range on ``u_ff + du``, a box on the velocity and a *contact-force
+limit*: the net slide effort ``|du_i| <= force_limit``. Gravity and bias forces are compensated
+outside the QP and the joint damping by ``u_ff``, so in quasi-static contact ``du`` is the force
+the gripper exerts: the QP plans every motion knowing that it may never push harder than the
+limit (a stiff position tracker otherwise; impacts add their own, brief, force).
+
+Force-controlled axes (a non-zero ``target.force_world`` entry ``f``): the reference along the
+axis is put ``REACH`` beyond the current position in the direction of ``f`` and the effort bound
+becomes ``[min(0, f), max(0, f)]`` (``f`` clipped to the force limit): pressed against a surface
+the QP saturates at exactly ``f``; moving freely it is still held to the velocity box.
+
+The QP's Hessian and constraint matrix are constant: CasADi's ``conic`` interface is built once
+and re-solved with new linear terms and bounds, warm-started from the previous solution. Default
+solver qpOASES (``osqp`` selectable). Runs every ``mpc_dt`` (default 10 ms, 100 Hz), zero-order hold between.
 """
 
 from __future__ import annotations
@@ -53,6 +63,7 @@ from peg_ctrl.state import ControlState
 __all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
 
 _NAN3 = (math.nan, math.nan, math.nan)
+REACH = 0.01  # a force-controlled axis's reference lies this far beyond the gripper [m]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -72,6 +83,7 @@ class MPCConfig(ControllerConfig):
     v_max: float = 0.5  # velocity box [m/s]
     omega_max: float = 2.0  # angular velocity box [rad/s]
     solver: str = "qpoases"  # qpoases or osqp
+    force_limit: float = 1000.0  # bound on the net slide effort [N] (default: above the actuators' range)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.horizon, int) and not isinstance(self.horizon, bool) and self.horizon >= 2):
@@ -231,6 +243,23 @@ class MPCController(ControllerBase[MPCConfig]):
         self.reset_warm_start()
         self._count = 0
 
+    def _effort_bounds(
+        self, target: GripperTarget, z0: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Bounds on ``du`` (6,): the force limit on the slides, the commanded force on
+        force-controlled axes (whose position error ``z0`` is replaced by ``REACH`` towards it)."""
+        limit = self.config.force_limit
+        lo = np.full(6, -np.inf)
+        hi = np.full(6, np.inf)
+        lo[:3], hi[:3] = -limit, limit
+        if target.force_controlled:
+            for i, f in enumerate(target.force_world.tolist()):
+                if f:
+                    f = max(-limit, min(limit, f))  # never beyond the limit
+                    z0[2 * i] = math.copysign(REACH, f)
+                    lo[i], hi[i] = min(0.0, f), max(0.0, f)
+        return lo, hi
+
     def error_state(self, state: ControlState, target: GripperTarget) -> NDArray[np.float64]:
         """``z0`` (12,): per DoF (position or orientation error, velocity error)."""
         mujoco.mju_subQuat(self._err, target.quat_world, state.quat_world)
@@ -242,13 +271,22 @@ class MPCController(ControllerBase[MPCConfig]):
         return z
 
     def solve(
-        self, z0: NDArray[np.float64], u_ff: NDArray[np.float64], v_ref: NDArray[np.float64]
+        self,
+        z0: NDArray[np.float64],
+        u_ff: NDArray[np.float64],
+        v_ref: NDArray[np.float64],
+        du_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> NDArray[np.float64]:
-        """The first effort correction ``du_0`` (6,) of the QP from error ``z0``."""
+        """The first effort correction ``du_0`` (6,) of the QP from error ``z0``; ``du_bounds``
+        (low, high) (6,) further bound the correction (the contact-force limit)."""
         h = self.config.horizon
         g = self._lin @ z0
-        lbx = np.tile(-self.u_max - u_ff, h)
-        ubx = np.tile(self.u_max - u_ff, h)
+        lo, hi = -self.u_max - u_ff, self.u_max - u_ff
+        if du_bounds is not None:
+            lo, hi = np.maximum(lo, du_bounds[0]), np.minimum(hi, du_bounds[1])
+            hi = np.maximum(lo, hi)
+        lbx = np.tile(lo, h)
+        ubx = np.tile(hi, h)
         # v_k = v_ref - (Phi z0 + Gamma U)_vel must stay in [-v_max, v_max].
         free = self._phi[self._vel_rows] @ z0
         v_ref_rows = np.tile(v_ref, h)
@@ -282,14 +320,16 @@ class MPCController(ControllerBase[MPCConfig]):
             z0 = self.error_state(state, target)
             if not np.all(np.isfinite(z0)):
                 return Effort(_NAN3, _NAN3, "non_finite")  # the base class raises, naming the cause
+            bounds = self._effort_bounds(target, z0)
             t0 = time.perf_counter()
             try:
-                self._u = self.solve(z0, u_ff, v_ref)
+                self._u = self.solve(z0, u_ff, v_ref, bounds)
                 stats = self._solver.stats()
                 status = "ok" if stats.get("success", True) else str(stats.get("return_status", "failed"))
                 iterations = int(stats.get("iter_count", 0) or 0)
             except RuntimeError as exc:
-                self._u = -self.k_lqr @ z0  # fall back to the LQR law, reported
+                # Fall back to the LQR law within the same bounds, reported.
+                self._u = np.clip(-self.k_lqr @ z0, bounds[0], bounds[1])
                 status = f"qp_failed: {exc}".splitlines()[0]
             self.last_solve = Diagnostics(time.perf_counter() - t0, status, iterations)
         self._count += 1

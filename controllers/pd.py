@@ -8,6 +8,10 @@ Slides (world frame)::
 ``v_max`` (a soft velocity cap); ``b`` is the slide damping of the model (a feed-forward that
 cancels it along the reference), ``m g`` the weight of the gripper subtree.
 
+Force-controlled axes (a non-zero ``target.force_world`` entry): the stiffness term is replaced
+by the commanded force, open loop (no force feedback; the damping term stays), so in quasi-static
+contact the gripper pushes with that force.
+
 Ball joint (gripper frame, as MuJoCo's ball-joint velocities are)::
 
     theta   = Log(q^-1 q_d)                      (mju_subQuat: minimal angle, short way round)
@@ -110,10 +114,15 @@ class PDController(ControllerBase[PDConfig]):
         # Slides.
         kp, kd = cfg.kp_pos, cfg.kd_pos
         ex, ey, ez = kp * (tx - px), kp * (ty - py), kp * (tz - pz)
+        fdx = fdy = fdz = 0.0
+        if target.force_controlled:  # the position error along a force-controlled axis is ignored
+            fdx, fdy, fdz = target.force_world.tolist()
+            ex, ey, ez = (0.0 if fdx else ex), (0.0 if fdy else ey), (0.0 if fdz else ez)
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
         if norm > self._slide_cap:
             scale = self._slide_cap / norm
             ex, ey, ez = ex * scale, ey * scale, ez * scale
+        ex, ey, ez = ex + fdx, ey + fdy, ez + fdz
         fx = ex + kd * (tvx - vx)
         fy = ey + kd * (tvy - vy)
         fz = ez + kd * (tvz - vz)

@@ -1,4 +1,4 @@
-"""Experiment files: controllers x planners x clearances x seeds, with randomization settings.
+"""Experiment files: controllers x strategies x planners x clearances x grid x seeds.
 
 An experiment file (YAML, TOML or JSON) loads into :class:`ExperimentConfig`; every error names
 its field (``controllers[1].kp_pos: ...``). Example::
@@ -14,6 +14,16 @@ its field (``controllers[1].kp_pos: ...``). Example::
     domain: {peg_mass_scale: [0.8, 1.2], friction_scale: [0.8, 1.2], gain_scale: [0.9, 1.1]}
     task: {force_guarded_insert: false}
     physics: {profile: precision}   # seed (default) or precision, see docs/physics.md
+
+A contact study (see ``experiments/configs/contact.yaml``) names a task family and sweeps its
+strategies and disturbances as well::
+
+    task: {name: held_insertion, position_noise: 0.0}
+    strategies: [straight, spiral, tilt]   # task.strategy, crossed with the controllers
+    scene: {assets: {chamfer: 0.001}}       # the base scene (clearances still sweep clearance)
+    grid:                                   # any dotted episode-config keys, crossed
+      task.lateral_error: [0.0005, 0.0015, 0.003]
+      task.tilt_error: [0.0, 0.02618]
 """
 
 from __future__ import annotations
@@ -25,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from peg_ctrl.assets import AssetParams
-from peg_ctrl.config import ConfigError, load, read_mapping, to_dict
+from peg_ctrl.config import ConfigError, apply_overrides, load, read_mapping, to_dict
 from peg_ctrl.controllers.base import ControllerConfig
 from peg_ctrl.episode import (
     DomainConfig,
@@ -36,9 +46,11 @@ from peg_ctrl.episode import (
 from peg_ctrl.physics import PhysicsConfig
 from peg_ctrl.planners import PLANNERS
 from peg_ctrl.scene import SceneConfig
+from peg_ctrl.tasks.base import TaskSpec
+from peg_ctrl.tasks.held_insertion import STRATEGIES
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig
 
-__all__ = ["ExperimentConfig", "Job", "load_experiment", "expand"]
+__all__ = ["ExperimentConfig", "Job", "load_experiment", "expand", "cells", "apply_experiment_overrides"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,9 +63,12 @@ class ExperimentConfig:
     max_steps: int | None = None  # physics steps; None: 20 s of sim whatever the profile's step
     randomization: RandomizationConfig = RandomizationConfig(enabled=True)
     domain: DomainConfig = DomainConfig()
-    task: TaskConfig = TaskConfig()
+    task: TaskSpec = TaskConfig()
     success: SuccessConfig = SuccessConfig()
     physics: PhysicsConfig = PhysicsConfig()
+    strategies: tuple[str, ...] = ()  # task.strategy values to cross; empty: the task's own
+    scene: SceneConfig = SceneConfig()  # the base scene; ``clearances`` replaces its clearance
+    grid: dict[str, Any] = dataclasses.field(default_factory=dict)  # dotted key -> list of values
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -78,6 +93,46 @@ class ExperimentConfig:
             raise ConfigError("seeds: repeated seeds")
         if self.max_steps is not None and self.max_steps < 1:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
+        if self.strategies:
+            if not hasattr(self.task, "strategy"):
+                raise ConfigError(
+                    f"strategies: task {self.task.name!r} has no strategy; use task: {{name: held_insertion}}"
+                )
+            for i, name in enumerate(self.strategies):
+                if name not in STRATEGIES:
+                    raise ConfigError(
+                        f"strategies[{i}]: must be one of {', '.join(STRATEGIES)}, got {name!r}"
+                    )
+            if len(set(self.strategies)) != len(self.strategies):
+                raise ConfigError("strategies: repeated strategies")
+        for key, values in self.grid.items():
+            if not isinstance(key, str) or not key:
+                raise ConfigError(f"grid: keys must be dotted field names, got {key!r}")
+            if not isinstance(values, list) or not values:
+                raise ConfigError(f"grid.{key}: expected a non-empty list of values, got {values!r}")
+            if key.split(".")[0] in _NOT_IN_GRID or key in _NOT_IN_GRID:
+                raise ConfigError(
+                    f"grid.{key}: sweep this with controllers/strategies/planners/clearances/seeds"
+                )
+            if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+                raise ConfigError(f"grid.{key}: repeated values {values!r}")
+        # Every grid cell must make a valid episode config (and the scene must suit the physics).
+        base = _episode(
+            self, self.controllers[0], (self.strategies or ("",))[0], self.planners[0], self.clearances[0]
+        )
+        for cell in cells(self):
+            _apply_cell(base, cell)
+
+
+_NOT_IN_GRID = ("controller", "seed", "planner", "task.strategy", "task.name", "scene.assets.clearance")
+
+
+def cells(exp: ExperimentConfig) -> list[dict[str, Any]]:
+    """The grid's cells (dotted key -> value), crossed in file order; one empty cell without a grid."""
+    out: list[dict[str, Any]] = [{}]
+    for key, values in exp.grid.items():
+        out = [{**cell, key: value} for cell in out for value in values]
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,6 +146,13 @@ class Job:
     clearance: float
     seed: int
     config: EpisodeConfig
+    strategy: str = ""
+    cell: dict[str, Any] = dataclasses.field(default_factory=dict)  # the grid values
+
+    @property
+    def arm(self) -> str:
+        """What the sweep compares: the controller, and the strategy when there is one."""
+        return f"{self.controller_label}/{self.strategy}" if self.strategy else self.controller_label
 
 
 def _changed_fields(spec: ControllerConfig) -> dict[str, Any]:
@@ -106,6 +168,18 @@ def _controller_label(spec: ControllerConfig, all_specs: tuple[ControllerConfig,
         return spec.name
     inner = ",".join(f"{k}={v}" for k, v in sorted(changed.items()))
     return f"{spec.name}({inner})"
+
+
+def apply_experiment_overrides(data: dict[str, Any], assignments: list[str]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` on an experiment's plain data; a key the grid sweeps is fixed to the
+    value instead (its grid axis is dropped), so ``--set task.lateral_error=0.002`` works on a
+    file that sweeps the lateral error."""
+    result = apply_overrides(data, assignments)
+    grid = result.get("grid")
+    if isinstance(grid, dict):
+        for item in assignments:
+            grid.pop(item.partition("=")[0].strip(), None)
+    return result
 
 
 def load_experiment(path: Path) -> ExperimentConfig:
@@ -130,31 +204,69 @@ def experiment_from_mapping(data: dict[str, Any], *, default_name: str = "experi
     return load(ExperimentConfig, data)
 
 
+def _episode(
+    exp: ExperimentConfig, spec: ControllerConfig, strategy: str, planner: str, clearance: float
+) -> EpisodeConfig:
+    """The episode config of one arm, planner and clearance, before the grid cell and the seed."""
+    task = dataclasses.replace(exp.task, strategy=strategy) if strategy else exp.task  # type: ignore[call-arg]
+    scene = dataclasses.replace(exp.scene, assets=dataclasses.replace(exp.scene.assets, clearance=clearance))
+    return EpisodeConfig(
+        controller=spec,
+        planner=planner,
+        max_steps=exp.max_steps,
+        task=task,
+        success=exp.success,
+        randomization=exp.randomization,
+        domain=exp.domain,
+        scene=scene,
+        physics=exp.physics,
+    )
+
+
 def expand(exp: ExperimentConfig) -> list[Job]:
-    """Every episode of the experiment, in a fixed order (controller, planner, clearance, seed)."""
+    """Every episode of the experiment, in a fixed order (controller, strategy, planner,
+    clearance, grid cell, seed)."""
     jobs = []
+    strategies: tuple[str, ...] = exp.strategies or (str(getattr(exp.task, "strategy", "")),)
     for spec in exp.controllers:
         label = _controller_label(spec, exp.controllers)
-        for planner in exp.planners:
-            for clearance in exp.clearances:
-                scene = SceneConfig(assets=AssetParams(clearance=clearance))
-                for seed in exp.seeds:
-                    cfg = EpisodeConfig(
-                        controller=spec,
-                        planner=planner,
-                        seed=seed,
-                        max_steps=exp.max_steps,
-                        task=exp.task,
-                        success=exp.success,
-                        randomization=exp.randomization,
-                        domain=exp.domain,
-                        scene=scene,
-                        physics=exp.physics,
-                    )
-                    blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
-                    key = hashlib.sha256(blob).hexdigest()[:16]
-                    jobs.append(Job(key, spec.name, label, planner, clearance, seed, cfg))
+        for strategy in strategies:
+            for planner in exp.planners:
+                for clearance in exp.clearances:
+                    base = _episode(exp, spec, strategy, planner, clearance)
+                    for cell in cells(exp):
+                        cell_cfg = _apply_cell(base, cell)
+                        for seed in exp.seeds:
+                            cfg = dataclasses.replace(cell_cfg, seed=seed)
+                            blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
+                            key = hashlib.sha256(blob).hexdigest()[:16]
+                            jobs.append(
+                                Job(key, spec.name, label, planner, clearance, seed, cfg, strategy, cell)
+                            )
+    if len({j.key for j in jobs}) != len(jobs):
+        raise ConfigError("the experiment lists the same episode twice (repeated controllers or clearances?)")
     return jobs
+
+
+def _apply_cell(base: EpisodeConfig, cell: dict[str, Any]) -> EpisodeConfig:
+    if not cell:
+        return base
+    data = to_dict(base)
+    for key, value in cell.items():
+        node = data
+        parts = key.split(".")
+        for part in parts[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                raise ConfigError(f"grid.{key}: {part} is not a section of the episode config")
+            node = child
+        if parts[-1] not in node:
+            raise ConfigError(f"grid.{key}: no such field in the episode config")
+        node[parts[-1]] = value
+    try:
+        return episode_config_from_mapping(data)
+    except ConfigError as exc:
+        raise ConfigError(f"grid: {exc}") from None
 
 
 def job_config_mapping(job: Job) -> dict[str, Any]:

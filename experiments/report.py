@@ -32,12 +32,17 @@ def _float(value: Any) -> float | None:
     return float(value)
 
 
+def arm_of(row: dict[str, Any]) -> str:
+    """The row's arm: controller, and strategy when the sweep has them."""
+    return str(row.get("arm") or row["controller"])
+
+
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per controller x planner x clearance: rates, intervals, force and time statistics."""
+    """Per arm (controller/strategy) x planner x clearance: rates, intervals, force and time statistics."""
     groups: dict[tuple[str, str, float], list[dict[str, Any]]] = defaultdict(list)
     order: list[tuple[str, str, float]] = []
     for row in rows:
-        key = (row["controller"], row["planner"], float(row["clearance_m"]))
+        key = (arm_of(row), row["planner"], float(row["clearance_m"]))
         if key not in groups:
             order.append(key)
         groups[key].append(row)
@@ -56,6 +61,12 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         reasons = Counter(r["reason"] for r in group if r["status"] != "success")
         force_ci = median_ci(forces.tolist())
         time_ci = median_ci(times)
+        seat = [
+            t
+            for t in (_float(r.get("contact_to_seat_s")) for r in group if r["status"] == "success")
+            if t is not None
+        ]
+        impulses = [x for x in (_float(r.get("contact_impulse_ns")) for r in group) if x is not None]
         out.append(
             {
                 "controller": key[0],
@@ -73,6 +84,8 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "time_to_insert_median_s": float(np.median(times)) if times else None,
                 "time_to_insert_median_ci95_low_s": time_ci[1],
                 "time_to_insert_median_ci95_high_s": time_ci[2],
+                "contact_to_seat_median_s": float(np.median(seat)) if seat else None,
+                "impulse_median_ns": float(np.median(impulses)) if impulses else None,
                 "failure_reasons": ";".join(f"{k}:{v}" for k, v in sorted(reasons.items())),
             }
         )
@@ -91,7 +104,7 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
     import matplotlib.pyplot as plt
 
     made: list[tuple[str, str]] = []
-    controllers = list(dict.fromkeys(r["controller"] for r in rows))
+    controllers = list(dict.fromkeys(arm_of(r) for r in rows))
     colours = {c: f"C{i}" for i, c in enumerate(controllers)}
 
     # 1. Force profiles around the release, median and 10-90 % band per controller.
@@ -101,7 +114,7 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
         for ax, column in zip(axes, ("block-peg", "peg-table"), strict=True):
             curves = []
             for r in rows:
-                if r["controller"] != ctrl:
+                if arm_of(r) != ctrl:
                     continue
                 curve = _aligned_force(out_dir / Path(r["log_path"]).parent, column, grid)
                 if curve is not None:
@@ -151,9 +164,9 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
 
     # 3. Peak peg-block force per controller.
     fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
-    data = [[float(r["peak_contact_force_n"]) for r in rows if r["controller"] == c] for c in controllers]
+    data = [[float(r["peak_contact_force_n"]) for r in rows if arm_of(r) == c] for c in controllers]
     ax.boxplot(data, showfliers=True)
-    ax.set_xticks(range(1, len(controllers) + 1), controllers, rotation=20)
+    ax.set_xticks(range(1, len(controllers) + 1), controllers, rotation=20, ha="right", fontsize=8)
     ax.set_ylabel("peak peg-block contact force [N]")
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -176,7 +189,113 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
     fig.savefig(out_dir / "failures.png")
     plt.close(fig)
     made.append(("Failure reasons by phase", "failures.png"))
+    made += _contact_plots(out_dir, rows, controllers, colours)
     return made
+
+
+def _condition_success(rows: list[dict[str, Any]], arm: str, column: str) -> list[tuple[float, int, int]]:
+    """(value, successes, episodes) per value of ``column`` for one arm, pooled over the rest."""
+    counts: dict[float, list[int]] = defaultdict(lambda: [0, 0])
+    for r in rows:
+        if arm_of(r) == arm and r.get(column) not in (None, ""):
+            c = counts[float(r[column])]
+            c[0] += r["status"] == "success"
+            c[1] += 1
+    return [(v, k, n) for v, (k, n) in sorted(counts.items())]
+
+
+def _contact_plots(
+    out_dir: Path, rows: list[dict[str, Any]], arms: list[str], colours: dict[str, str]
+) -> list[tuple[str, str]]:
+    """Success vs each swept disturbance, and force-vs-depth traces, per arm (contact studies)."""
+    import matplotlib.pyplot as plt
+
+    made: list[tuple[str, str]] = []
+    conditions = [
+        (column, label, scale)
+        for column, label, scale in (
+            ("task.lateral_error", "lateral error at first contact [mm]", 1e3),
+            ("task.tilt_error", "peg tilt in the grasp [deg]", 180.0 / math.pi),
+            ("task.position_noise", "noise on the observed hole position [mm]", 1e3),
+        )
+        if any(r.get(column) not in (None, "") for r in rows)
+    ]
+    if conditions:
+        fig, axes = plt.subplots(
+            1, len(conditions), figsize=(6 * len(conditions), 4.2), dpi=110, squeeze=False
+        )
+        for ax, (column, label, scale) in zip(axes[0], conditions, strict=True):
+            for i, arm in enumerate(arms):
+                pts = _condition_success(rows, arm, column)
+                if not pts:
+                    continue
+                x = np.array([p[0] for p in pts]) * scale
+                x = x + (i - (len(arms) - 1) / 2) * 0.012 * (x.max() - x.min() or 1.0)  # dodge
+                y = np.array([k / n for _, k, n in pts])
+                ci = np.array([wilson_interval(k, n) for _, k, n in pts])
+                ax.errorbar(
+                    x,
+                    y,
+                    yerr=[y - ci[:, 0], ci[:, 1] - y],
+                    marker="o",
+                    capsize=3,
+                    color=colours[arm],
+                    label=arm,
+                )
+            ax.set_xlabel(label)
+            ax.set_ylabel("success rate (95 % Wilson interval)")
+            ax.set_ylim(-0.05, 1.05)
+            ax.grid(alpha=0.3)
+        axes[0][0].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(out_dir / "success_vs_disturbance.png")
+        plt.close(fig)
+        made.append(("Success vs disturbance", "success_vs_disturbance.png"))
+
+    # Force against depth, a few episodes per arm.
+    held = [r for r in rows if r.get("task") == "held_insertion"]
+    if held:
+        cols = min(3, len(arms))
+        nrows = math.ceil(len(arms) / cols)
+        fig, axes = plt.subplots(nrows, cols, figsize=(5.2 * cols, 3.6 * nrows), dpi=110, squeeze=False)
+        for ax, arm in zip(axes.flat, arms, strict=False):
+            picked = [r for r in held if arm_of(r) == arm][:: max(1, len(held) // (len(arms) * 12))][:12]
+            for r in picked:
+                trace = _trace(out_dir / Path(r["log_path"]).parent)
+                if trace is None:
+                    continue
+                depth, force = trace
+                ok = r["status"] == "success"
+                ax.plot(depth * 1e3, force, lw=0.7, alpha=0.7, color="C2" if ok else "C3")
+            ax.set_title(f"{arm} (green: seated, red: not)", fontsize=9)
+            ax.set_xlabel("depth of the peg's lower end [mm]")
+            ax.set_ylabel("peg-block force [N]")
+            ax.grid(alpha=0.3)
+        for ax in list(axes.flat)[len(arms) :]:
+            ax.set_visible(False)
+        fig.tight_layout()
+        fig.savefig(out_dir / "force_vs_depth.png")
+        plt.close(fig)
+        made.append(("Force against depth", "force_vs_depth.png"))
+    return made
+
+
+def _trace(episode_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(depth [m], peg-block force [N]) of an episode's force trace, from its first contact."""
+    trace = episode_dir / "forces.npz"
+    if not trace.is_file():
+        return None
+    with np.load(trace) as npz:
+        columns = [str(c) for c in npz["columns"]]
+        data = npz["data"]
+    if "peg_depth_m" not in columns or len(data) == 0:
+        return None
+    force = data[:, columns.index("block-peg")]
+    touched = np.flatnonzero(force > 0.05)
+    if len(touched) == 0:
+        return None
+    start = int(touched[0])
+    return data[start:, columns.index("peg_depth_m")], force[start:]
 
 
 def _aligned_force(episode_dir: Path, column: str, grid: np.ndarray) -> np.ndarray | None:
@@ -187,8 +306,12 @@ def _aligned_force(episode_dir: Path, column: str, grid: np.ndarray) -> np.ndarr
     trace = episode_dir / "forces.npz"
     if not (summary.is_file() and trace.is_file()):
         return None
-    phases = json.loads(summary.read_text()).get("phases", [])
-    starts = [p["t_start"] for p in phases if p["phase"] in ("insert", "release")]
+    record = json.loads(summary.read_text())
+    phases = record.get("phases", [])
+    if record.get("task") == "held_insertion":  # aligned at the first peg-block contact
+        starts = [record["first_contact_s"]] if record.get("first_contact_s") is not None else []
+    else:
+        starts = [p["t_start"] for p in phases if p["phase"] in ("insert", "release")]
     if not starts:
         return None
     with np.load(trace) as npz:
@@ -242,6 +365,37 @@ def _comparison_section(rows: list[dict[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
+def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Success and median peak force per arm in every grid cell (contact studies)."""
+    keys = [k for k in (rows[0] if rows else {}) if "." in k]  # the grid's dotted keys
+    if not keys:
+        return []
+    cells = list(dict.fromkeys(tuple(r[k] for k in keys) for r in rows))
+    arms = list(dict.fromkeys(arm_of(r) for r in rows))
+    lines = [
+        "## Success per grid cell",
+        "",
+        "Successes / episodes, and the median peak peg-block force [N], per arm and cell.",
+        "",
+        "| arm | "
+        + " | ".join(
+            ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, c, strict=True)) for c in cells
+        )
+        + " |",
+        "|---|" + "---|" * len(cells),
+    ]
+    for arm in arms:
+        cells_text = []
+        for c in cells:
+            group = [r for r in rows if arm_of(r) == arm and tuple(r[k] for k in keys) == c]
+            wins = sum(r["status"] == "success" for r in group)
+            forces = [float(r["peak_contact_force_n"]) for r in group]
+            med = f"{np.median(forces):.1f} N" if forces else "–"
+            cells_text.append(f"{wins}/{len(group)}, {med}")
+        lines.append(f"| {arm} | " + " | ".join(cells_text) + " |")
+    return [*lines, ""]
+
+
 def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
     head = "| " + " | ".join(title for _, title in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
@@ -285,7 +439,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
     parts = [
         f"# Experiment report: {exp.get('name', out_dir.name)}",
         "",
-        f"{len(rows)} episodes: controllers {', '.join(dict.fromkeys(r['controller'] for r in rows))}; "
+        f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
         f"planners {', '.join(exp.get('planners', []))}; clearances "
         f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
         f"`{exp.get('physics', {}).get('profile', 'seed')}`."
@@ -296,7 +450,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         _table(
             summary,
             [
-                ("controller", "controller"),
+                ("controller", "arm"),
                 ("planner", "planner"),
                 ("clearance_mm", "clearance [mm]"),
                 ("success", "success"),
@@ -306,10 +460,13 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
                 ("peak_force_p95_n", "peak force p95 [N]"),
                 ("time_to_insert_median_s", "time to insert [s]"),
                 ("time_ci", "95 % CI"),
+                ("contact_to_seat_median_s", "contact to seated [s]"),
+                ("impulse_median_ns", "impulse median [N s]"),
                 ("failure_reasons", "failures"),
             ],
         ),
         "",
+        *_cell_section(rows),
         *_comparison_section(rows),
     ]
     for title, name in plots:

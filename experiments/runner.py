@@ -4,9 +4,10 @@ Layout of ``out_dir``::
 
     experiment.json         the resolved experiment (every default filled in)
     episodes/<key>/         one episode: summary.json, config.json, log.jsonl, forces.npz
-    episodes.csv/.parquet   one row per episode
-    summary.csv             per controller (x clearance): success rate with a 95 % Wilson interval,
-                            peak force median / p95, time to insert, failure reasons
+    episodes.csv/.parquet   one row per episode: the arm (controller/strategy), the varied values
+                            (clearance, seed, grid cells) and every metric of summary.json
+    summary.csv             per arm x planner x clearance: success rate with a 95 % Wilson
+                            interval, peak force median / p95, time to insert, failure reasons
     report.md, *.png        the tables and plots
 
 An episode whose ``summary.json`` exists (and was not interrupted) is done: rerunning the same
@@ -40,6 +41,12 @@ _SUMMARY_COLUMNS = (
     "peak_contact_force_n",
     "peak_any_contact_force_n",
     "time_to_insert_s",
+    "first_contact_s",
+    "contact_to_seat_s",
+    "contact_impulse_ns",
+    "max_tilt_rad",
+    "search_distance_m",
+    "end_state",
     "insertion_depth_m",
     "lateral_error_m",
     "tilt_rad",
@@ -55,8 +62,11 @@ _SUMMARY_COLUMNS = (
 
 EPISODE_COLUMNS = (
     "key",
+    "arm",
     "controller",
     "controller_name",
+    "task",
+    "strategy",
     "planner",
     "clearance_m",
     "seed",
@@ -186,6 +196,7 @@ def run_sweep(
         raise ConfigError(f"workers must be >= 1, got {workers}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    jobs = expand(exp)  # before anything is written: a bad experiment leaves nothing behind
     saved = out_dir / "experiment.json"
     resolved = json.dumps(to_dict(exp), indent=2, sort_keys=True) + "\n"
     if saved.is_file() and saved.read_text() != resolved:
@@ -193,7 +204,6 @@ def run_sweep(
             f"{out_dir} holds results of a different experiment; use another --out or delete it"
         )
     atomic_write_text(saved, resolved)
-    jobs = expand(exp)
     tasks = [
         (job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key))
         for job in jobs
@@ -238,17 +248,27 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
         rows.append(
             {
                 "key": job.key,
+                "arm": job.arm,
                 "controller": job.controller_label,
                 "controller_name": job.controller,
+                "task": job.config.task.name,
+                "strategy": job.strategy,
                 "planner": job.planner,
                 "clearance_m": job.clearance,
                 "seed": job.seed,
                 **draw,
                 **{name: s[name] for name in _SUMMARY_COLUMNS},
                 "log_path": str(Path("episodes") / job.key / "log.jsonl"),
+                **job.cell,
             }
         )
     return rows
+
+
+def columns(rows: list[dict[str, Any]]) -> list[str]:
+    """:data:`EPISODE_COLUMNS` and the experiment's grid keys (``task.lateral_error``, ...)."""
+    extra = [k for k in (rows[0] if rows else {}) if k not in EPISODE_COLUMNS]
+    return [*EPISODE_COLUMNS, *extra]
 
 
 def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
@@ -257,17 +277,18 @@ def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
 
     from peg_ctrl.experiments.report import summarise
 
+    names = columns(rows)
     with open(out_dir / "episodes.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=EPISODE_COLUMNS)
+        writer = csv.DictWriter(fh, fieldnames=names)
         writer.writeheader()
         # wall time varies run to run; everything else is deterministic
         for row in rows:
-            writer.writerow({k: ("" if row[k] is None else row[k]) for k in EPISODE_COLUMNS})
+            writer.writerow({k: ("" if row[k] is None else row[k]) for k in names})
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        table = pa.Table.from_pylist([{k: row[k] for k in EPISODE_COLUMNS} for row in rows])
+        table = pa.Table.from_pylist([{k: row[k] for k in names} for row in rows])
         pq.write_table(table, out_dir / "episodes.parquet")
     except ImportError:  # pragma: no cover - pyarrow is a dependency
         pass

@@ -168,7 +168,7 @@ def _median(values: list[float]) -> float | None:
 
 
 def _arm(row: dict[str, object]) -> str:
-    return f"{row['controller']}+{row['planner']}"
+    return f"{row.get('arm') or row['controller']}+{row['planner']}"
 
 
 def _number(value: object) -> float | None:

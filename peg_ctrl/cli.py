@@ -329,11 +329,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
     path = _resolve_experiment(args.config)
     from peg_ctrl.batch import default_workers
-    from peg_ctrl.config import apply_overrides, read_mapping
-    from peg_ctrl.experiments.config import experiment_from_mapping
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.experiments.config import apply_experiment_overrides, experiment_from_mapping
     from peg_ctrl.experiments.runner import run_sweep
 
-    data = apply_overrides(read_mapping(path), args.set or [])
+    data = apply_experiment_overrides(read_mapping(path), args.set or [])
     exp = experiment_from_mapping(data, default_name=path.stem)
     workers = args.workers or default_workers()
     if workers < 1:

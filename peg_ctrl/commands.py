@@ -30,6 +30,8 @@ __all__ = [
 JAW_SEP_MAX_M = 0.085
 POSITION_LIMIT_M = 10.0  # slide joint range (SPEC §3.2)
 COMMAND_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw", "jaw_sep_m")
+_NO_FORCE = np.zeros(3)
+_NO_FORCE.setflags(write=False)  # shared by every pose-only target
 
 
 def euler_to_quat(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
@@ -66,6 +68,11 @@ class GripperTarget:
         v_world: Feed-forward linear velocity, shape (3,), [m/s].
         omega_body: Feed-forward angular velocity in the gripper frame, shape (3,), [rad/s].
         jaw_sep_m: Desired pad separation [m], in [0, 0.085].
+        force_world: Force the gripper should exert on its surroundings, shape (3,), [N], world
+            frame. An axis with a non-zero entry is *force-controlled* (hybrid position/force
+            control): the controller regulates that force component and ignores the position
+            error along the axis (the velocity reference still damps). Zero everywhere (the
+            default) is pure pose tracking. How each controller realises it is in its docstring.
     """
 
     p_world: NDArray[np.float64]
@@ -73,9 +80,16 @@ class GripperTarget:
     v_world: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
     omega_body: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
     jaw_sep_m: float = JAW_SEP_MAX_M
+    force_world: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
-        for name, size in (("p_world", 3), ("quat_world", 4), ("v_world", 3), ("omega_body", 3)):
+        for name, size in (
+            ("p_world", 3),
+            ("quat_world", 4),
+            ("v_world", 3),
+            ("omega_body", 3),
+            ("force_world", 3),
+        ):
             value = np.array(getattr(self, name), dtype=float)  # a private, read-only copy
             value.setflags(write=False)
             if value.shape != (size,):
@@ -101,6 +115,7 @@ class GripperTarget:
         v_world: ArrayLike,
         omega_body: ArrayLike,
         jaw_sep_m: float,
+        force_world: ArrayLike | None = None,
     ) -> GripperTarget:
         """Build without validation, for planners whose samples are finite by construction.
 
@@ -118,7 +133,22 @@ class GripperTarget:
             arr.setflags(write=False)
             object.__setattr__(obj, name, arr)
         object.__setattr__(obj, "jaw_sep_m", float(jaw_sep_m))
+        force = _NO_FORCE if force_world is None else np.array(force_world, dtype=float)
+        force.setflags(write=False)
+        object.__setattr__(obj, "force_world", force)
         return obj
+
+    @property
+    def force_controlled(self) -> bool:
+        """Whether any axis is force-controlled."""
+        f = self.force_world
+        return bool(f[0] or f[1] or f[2])
+
+    def with_force(self, force_world: ArrayLike) -> GripperTarget:
+        """This target with ``force_world`` replaced (no validation, like :meth:`trusted`)."""
+        return GripperTarget.trusted(
+            self.p_world, self.quat_world, self.v_world, self.omega_body, self.jaw_sep_m, force_world
+        )
 
     @classmethod
     def from_pose(

@@ -1,10 +1,12 @@
 """One autonomous episode: its configuration, and the driver that runs it through the loop.
 
 The driver compiles the scene (cached per process), applies the per-seed domain draw, builds the
-controller, the pick-and-place task, the monitors and the recorders, runs :class:`~peg_ctrl.loop.Loop`
+controller, the task (``task.name``: pick-and-place by default, or held insertion), the monitors
+and the recorders, runs :class:`~peg_ctrl.loop.Loop`
 and writes ``summary.json``, ``config.json``, ``log.jsonl``, ``forces.npz`` (and the force plot
 and video) into the output directory. Success and failure are the task's and the monitors'
-(see :mod:`peg_ctrl.tasks.pick_and_place` and :mod:`peg_ctrl.monitors`).
+(see :mod:`peg_ctrl.tasks.pick_and_place`, :mod:`peg_ctrl.tasks.held_insertion` and
+:mod:`peg_ctrl.monitors`).
 
 Random streams, all from ``seed``: the task's start pose ``default_rng(seed)``, the domain draw
 ``default_rng([seed, 1])``, sensor noise ``default_rng([seed, 2])``.
@@ -38,7 +40,8 @@ from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
 from peg_ctrl.recorders import CallbackRecorder, StepLogRecorder, TraceRecorder, VideoRecorder
 from peg_ctrl.scene import SceneConfig, build_model
-from peg_ctrl.tasks.pick_and_place import PickAndPlaceTask, RandomizationConfig, SuccessConfig, TaskConfig
+from peg_ctrl.tasks.base import TaskContext, TaskSpec
+from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
 
 __all__ = [
     "RandomizationConfig",
@@ -108,7 +111,7 @@ class EpisodeConfig:
     seed: int = 0
     max_steps: int | None = None  # physics steps; None: EPISODE_TIME of sim (SPEC: 20,000 at 1 ms)
     limits: MotionLimits = MotionLimits()
-    task: TaskConfig = TaskConfig()
+    task: TaskSpec = TaskConfig()  # pick_and_place (default) or held_insertion, by ``name``
     success: SuccessConfig = SuccessConfig()
     randomization: RandomizationConfig = RandomizationConfig()
     domain: DomainConfig = DomainConfig()
@@ -118,6 +121,7 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         check_scene(self.physics.profile, self.scene)
+        self.task.check(self.scene)
         if self.planner not in PLANNERS:
             raise ConfigError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
         if self.max_steps is not None and self.max_steps < 1:
@@ -145,6 +149,8 @@ class EpisodeResult:
     controller: str
     planner: str
     physics: str  # the physics profile
+    task: str  # the task's name
+    strategy: str  # the insertion strategy ("" for a task without one)
     seed: int
     total_timesteps: int
     sim_time_s: float
@@ -159,6 +165,12 @@ class EpisodeResult:
     grip_penetration_m: float  # pads into the peg, whole episode
     peg_slip_m: float  # peg motion relative to the pad while held
     time_to_insert_s: float | None
+    first_contact_s: float | None  # first peg-block contact
+    contact_to_seat_s: float | None  # from the first contact to the start of the seated hold
+    contact_impulse_ns: float  # integral of the peg-block force from the first contact [N s]
+    max_tilt_rad: float  # largest peg tilt from the first contact on
+    search_distance_m: float  # lateral travel of the peg's lower end from the first contact on
+    end_state: str  # seated, missed, jammed or wedged (see peg_ctrl.monitors.classify_end_state)
     detail: str
     log_path: str
     trace_path: str
@@ -175,8 +187,9 @@ class EpisodeResult:
         else:
             head = f"{self.status.upper()} ({self.reason} in {self.phase})"
         tti = f", inserted at {self.time_to_insert_s:.2f} s" if self.time_to_insert_s is not None else ""
+        task = f"{self.task}/{self.strategy}" if self.strategy else self.task
         return (
-            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({self.physics} physics), "
+            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({task}, {self.physics} physics), "
             f"{self.total_timesteps} steps "
             f"({self.sim_time_s:.2f} s sim, {self.wall_time_s:.1f} s wall){tti}, "
             f"depth {self.insertion_depth_m * 1e3:.1f} mm, "
@@ -230,14 +243,16 @@ def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> L
     """The loop of one episode: model with the domain draw, scaled controller, task, monitors."""
     draw = domain_draw(cfg.seed, cfg.domain)
     model = prepare_model(cfg, draw)
-    task = PickAndPlaceTask(
-        scene=cfg.scene,
-        config=cfg.task,
-        success=cfg.success,
-        randomization=cfg.randomization,
-        planner=make_planner(cfg.planner),
-        limits=cfg.limits,
-        jaw=load_default(),
+    task = cfg.task.build(
+        TaskContext(
+            scene=cfg.scene,
+            success=cfg.success,
+            randomization=cfg.randomization,
+            planner=make_planner(cfg.planner),
+            limits=cfg.limits,
+            jaw=load_default(),
+            control_dt=cfg.controller.control_dt,
+        )
     )
     d, s = cfg.domain, cfg.success
     noise = None
@@ -311,13 +326,25 @@ def run_episode(
 def _result(
     cfg: EpisodeConfig, loop: Loop, outcome: LoopOutcome, wall: float, logger: EpisodeLogger
 ) -> EpisodeResult:
+    from peg_ctrl.monitors import classify_end_state
+
     task = loop.task
-    assert isinstance(task, PickAndPlaceTask)
-    m = task.insertion.last
+    insertion = getattr(task, "insertion", None)
+    m = insertion.last if insertion is not None else None
     depth, lateral, tilt = (m.depth_m, m.lateral_error_m, m.tilt_rad) if m is not None else (0.0, 0.0, 0.0)
     _, resting = loop.reader.pair_forces(loop.data)
     records = task.records
     grasp = loop.grasp
+    history = loop.history
+    time_to_insert = getattr(task, "time_to_insert", None)
+    a = cfg.scene.assets
+    if outcome.status == "success":
+        end_state = "seated"
+    elif m is not None and math.isfinite(m.lateral_error_m):
+        end_state = classify_end_state(m, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius)
+    else:
+        end_state = "missed"
+    first = history.first_contact
     return EpisodeResult(
         status=outcome.status,
         reason=outcome.reason,
@@ -325,6 +352,8 @@ def _result(
         controller=cfg.controller.name,
         planner=cfg.planner,
         physics=cfg.physics.profile,
+        task=cfg.task.name,
+        strategy=str(getattr(cfg.task, "strategy", "")),
         seed=cfg.seed,
         total_timesteps=loop.steps,
         sim_time_s=float(loop.data.time),
@@ -338,7 +367,15 @@ def _result(
         resting_penetration_m=max(resting),
         grip_penetration_m=loop.contact.grip_penetration,
         peg_slip_m=grasp.slip if grasp is not None else 0.0,
-        time_to_insert_s=task.time_to_insert,
+        time_to_insert_s=time_to_insert,
+        first_contact_s=first,
+        contact_to_seat_s=(
+            time_to_insert - first if time_to_insert is not None and first is not None else None
+        ),
+        contact_impulse_ns=history.impulse,
+        max_tilt_rad=history.max_tilt,
+        search_distance_m=history.travel,
+        end_state=end_state,
         detail=outcome.detail,
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),

@@ -27,7 +27,7 @@ from peg_ctrl.state import PAIRS
 
 __all__ = ["EpisodeLogger", "TRACE_COLUMNS", "read_log", "read_trace", "STEP_FIELDS"]
 
-TRACE_COLUMNS = ("t", "phase", *("-".join(p) for p in PAIRS), "peg_penetration_m")
+TRACE_COLUMNS = ("t", "phase", *("-".join(p) for p in PAIRS), "peg_penetration_m", "peg_depth_m")
 
 # Required fields of a step record (dotted paths), SPEC §7.
 STEP_FIELDS = (

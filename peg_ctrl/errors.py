@@ -71,7 +71,16 @@ class PlanningError(PegCtrlError, RuntimeError):
 
 
 #: Why an episode can fail (``EpisodeResult.reason``).
-FAILURE_REASONS = ("timeout", "force_spike", "excessive_tilt", "grasp_lost", "diverged")
+FAILURE_REASONS = (
+    "timeout",
+    "force_spike",
+    "excessive_tilt",
+    "grasp_lost",
+    "diverged",
+    "missed",  # held insertion: the peg never entered the bore
+    "jammed",  # ... stuck in the bore, held by friction
+    "wedged",  # ... stuck in the bore in two-point contact
+)
 
 
 class EpisodeFailure(PegCtrlError):

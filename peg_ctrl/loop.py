@@ -23,7 +23,7 @@ import numpy as np
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
-from peg_ctrl.monitors import ContactMonitor, DivergenceMonitor, GraspMonitor
+from peg_ctrl.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
 from peg_ctrl.scene import HOME_KEY, SceneConfig
 from peg_ctrl.state import BLOCK_PEG, ControlState, PegObservation, StateReader
 from peg_ctrl.tasks.base import Evaluation, Observation, Task
@@ -90,6 +90,7 @@ class Loop:
     task: Task
     scene: SceneConfig
     contact: ContactMonitor = dataclasses.field(default_factory=ContactMonitor)
+    history: ContactHistory = dataclasses.field(default_factory=ContactHistory)
     grasp: GraspMonitor | None = None
     noise: SensorNoise | None = None
     recorders: Sequence[Recorder] = ()
@@ -130,6 +131,7 @@ class Loop:
         obs = Observation(float(data.time), state, self.peg)
         self.task.start(obs)
         self.contact.reset()
+        self.history.reset()
         if self.grasp is not None:
             self.grasp.reset()
         self.divergence.reset(data)
@@ -156,6 +158,7 @@ class Loop:
         forces, pens = self.reader.pair_forces(data)
         peg = self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
         t = float(data.time)
+        self.history.update(t, self.control_dt, forces[BLOCK_PEG], peg)
         failure: EpisodeFailure | None = None
         try:
             self.divergence.check(data, self.steps)

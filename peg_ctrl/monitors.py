@@ -6,6 +6,8 @@
 - :class:`ContactMonitor` — peak contact forces and penetrations; fails on a force spike.
 - :class:`GraspMonitor` — slip and turn of the peg in the pads while it is held.
 - :class:`DivergenceMonitor` — MuJoCo warnings and non-finite state.
+- :class:`ContactHistory` — first peg-block contact, contact impulse, tilt and lateral travel
+  of the peg after it; :func:`classify_end_state` names how an unseated peg is stuck.
 
 A failing check raises :class:`~peg_ctrl.errors.EpisodeFailure`; the loop turns it into the
 episode's outcome.
@@ -32,7 +34,16 @@ __all__ = [
     "ContactMonitor",
     "GraspMonitor",
     "DivergenceMonitor",
+    "ContactHistory",
+    "classify_end_state",
+    "END_STATES",
+    "ENTRY_MARGIN",
+    "WEDGED_FRACTION",
 ]
+
+END_STATES = ("seated", "missed", "jammed", "wedged")
+ENTRY_MARGIN = 0.0005  # the lower end is in the bore this far below the chamfer [m]
+WEDGED_FRACTION = 0.9  # tilted to at least this fraction of the two-point-contact limit: wedged
 
 
 class InsertionMeasure(NamedTuple):
@@ -143,7 +154,7 @@ class GraspMonitor:
     def __init__(self, model: mujoco.MjModel, *, lost_distance: float, max_in_hand_tilt: float) -> None:
         self._pad = model.body(GRIPPER_PREFIX + "left_pad").id
         self._peg = model.body("peg").id
-        self.lost_distance = lost_distance  # peg centre to pinch point [m]
+        self.lost_distance = lost_distance  # peg displacement in the pad frame since the grasp [m]
         self.max_in_hand_tilt = max_in_hand_tilt  # [rad]
         self.reset()
 
@@ -158,9 +169,10 @@ class GraspMonitor:
         axis_pad = r_pad.T @ peg.axis_world
         if self._rel_ref is None or self._axis_ref is None:
             self._rel_ref, self._axis_ref = rel, axis_pad
-        self.slip = max(self.slip, float(np.linalg.norm(rel - self._rel_ref)))
-        if float(np.linalg.norm(peg.p_world - gripper.p_world)) > self.lost_distance:
-            raise EpisodeFailure("grasp_lost", "peg left the pads while held")
+        moved = float(np.linalg.norm(rel - self._rel_ref))
+        self.slip = max(self.slip, moved)
+        if moved > self.lost_distance:
+            raise EpisodeFailure("grasp_lost", f"peg moved {moved * 1e3:.1f} mm in the pads while held")
         in_hand = math.acos(min(1.0, abs(float(axis_pad @ self._axis_ref))))
         if in_hand > self.max_in_hand_tilt:
             raise EpisodeFailure("excessive_tilt", f"peg turned {in_hand:.2f} rad in the pads")
@@ -184,3 +196,54 @@ class DivergenceMonitor:
             float(data.qpos.sum() + data.qvel.sum())
         ):
             raise EpisodeFailure("diverged", "non-finite state or MuJoCo warning")
+
+
+def classify_end_state(m: InsertionMeasure, *, clearance: float, chamfer: float, radius: float) -> str:
+    """How a peg that is not seated ended: ``missed`` (the lowest point of its lower face never
+    passed the chamfer into the bore, by :data:`ENTRY_MARGIN`), ``wedged`` (in the bore, tilted
+    to at least :data:`WEDGED_FRACTION` of the largest tilt the bore allows at its depth:
+    two-point contact) or ``jammed`` (in the bore, less tilted: held by friction or too little
+    force; always, in an interference fit)."""
+    from peg_ctrl.validity import wedging_tilt
+
+    lowest = m.depth_m + radius * math.sin(m.tilt_rad)  # the lowest point of the lower face
+    if lowest - chamfer <= ENTRY_MARGIN:
+        return "missed"
+    if clearance <= 0.0:
+        return "jammed"  # an interference fit: no tilt fits, the peg is held by the bore itself
+    limit = wedging_tilt(clearance, m.depth_m - chamfer, radius)
+    return "wedged" if m.tilt_rad >= WEDGED_FRACTION * limit else "jammed"
+
+
+TRAVEL_STEP = 1e-4  # lateral travel is counted in moves of at least this [m]: chatter is not travel
+
+
+class ContactHistory:
+    """From the first peg-block contact on: its time [s], the contact impulse ``∫|F| dt`` [N s]
+    (sampled at the control rate), the largest peg tilt [rad] and the lateral travel of the
+    peg's lower end [m] (the search distance, counted in moves of :data:`TRAVEL_STEP` or more)."""
+
+    def __init__(self, threshold: float = 0.05) -> None:
+        self.threshold = threshold  # peg-block force that counts as contact [N]
+        self.reset()
+
+    def reset(self) -> None:
+        self.first_contact: float | None = None
+        self.impulse = 0.0
+        self.max_tilt = 0.0
+        self.travel = 0.0
+        self._xy = (0.0, 0.0)
+
+    def update(self, t: float, dt: float, force_block: float, peg: PegObservation) -> None:
+        x, y = float(peg.bottom_world[0]), float(peg.bottom_world[1])
+        if self.first_contact is None:
+            if force_block <= self.threshold:
+                return
+            self.first_contact = t
+            self._xy = (x, y)
+        self.impulse += force_block * dt
+        self.max_tilt = max(self.max_tilt, math.acos(min(1.0, abs(float(peg.axis_world[2])))))
+        moved = math.hypot(x - self._xy[0], y - self._xy[1])
+        if moved >= TRAVEL_STEP:
+            self.travel += moved
+            self._xy = (x, y)

@@ -19,6 +19,9 @@
     - those pairs use ``condim`` 3: sliding friction only. Torsional and rolling friction
       model a contact patch, which between rigid metal parts is microns wide; the seed's 0.1 m
       torsional coefficient (a patch ~20 cm across) resists the peg straightening in the hole;
+    - the convex collider (GJK/EPA) works to 1 nm (``ccd_tolerance``; MuJoCo's default 1 µm
+      let a flat peg end resting across the hole's convex parts report a bogus 1 mm overlap
+      now and then: a 180 N spike out of a 4 N push);
     - the Newton solver runs to convergence (tolerance 1e-10) at a 0.5 ms step with the
       ``implicitfast`` integrator; ``impratio`` 100 keeps the grasp without noslip, whose cost
       grows with the square of the contact count.
@@ -83,6 +86,8 @@ class PhysicsProfile:
     hole_roundness: float | None  # max corner deviation from the nominal radius [m]; None: n_parts
     contact_margin: float | None  # block geoms' margin, added to the hole [m]; None: the assets'
     pair: PegContactParams | None = None
+    ccd_tolerance: float | None = None  # convex collision (GJK/EPA) tolerance [m]; None: MuJoCo's
+    ccd_iterations: int | None = None  # ... and iteration cap; None: MuJoCo's
 
     def __post_init__(self) -> None:
         if self.peg_geom not in ("mesh", "cylinder"):
@@ -107,6 +112,10 @@ class PhysicsProfile:
         opt.noslip_iterations = self.noslip_iterations
         opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         opt.impratio = self.impratio
+        if self.ccd_tolerance is not None:
+            opt.ccd_tolerance = self.ccd_tolerance
+        if self.ccd_iterations is not None:
+            opt.ccd_iterations = self.ccd_iterations
 
 
 def parts_for_roundness(inradius: float, tolerance: float) -> int:
@@ -150,6 +159,8 @@ PRECISION = PhysicsProfile(
     hole_roundness=10e-6,
     contact_margin=0.0,
     pair=PegContactParams(),
+    ccd_tolerance=1e-9,
+    ccd_iterations=100,
 )
 
 PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION)}

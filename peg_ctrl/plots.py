@@ -20,6 +20,10 @@ _PHASE_COLOURS = {
     "insert": "#fbe9e7",
     "release": "#eeeeee",
     "settle": "#f7f7e8",
+    "push": "#fbe9e7",  # held insertion
+    "search": "#eef7e0",
+    "slide": "#eef7e0",
+    "straighten": "#f6e8f4",
 }
 
 

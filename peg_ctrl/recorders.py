@@ -22,14 +22,21 @@ def _round(values: Any, digits: int = 6) -> list[float]:
 
 
 class TraceRecorder:
-    """The full-rate force trace: time, phase index and every pair's force, each control step."""
+    """The full-rate force trace: time, phase index, every pair's force, the peg's deepest
+    penetration and its depth below the hole mouth, each control step."""
 
     def __init__(self, logger: EpisodeLogger, phases: tuple[str, ...]) -> None:
         self.logger = logger
         self._index = {p: float(i) for i, p in enumerate(phases)}
+        self._top: float | None = None
 
     def record(self, loop: Loop, info: StepInfo) -> None:
-        self.logger.trace((info.t, self._index.get(info.phase, -1.0), *info.forces, max(info.penetrations)))
+        if self._top is None:
+            self._top = float(loop.scene.assets.block_size[2])
+        depth = self._top - float(info.peg.bottom_world[2])  # the peg's lower end below the mouth
+        self.logger.trace(
+            (info.t, self._index.get(info.phase, -1.0), *info.forces, max(info.penetrations), depth)
+        )
 
 
 def step_record(loop: Loop, info: StepInfo) -> dict[str, Any]:

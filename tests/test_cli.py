@@ -87,7 +87,7 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
         (["sweep"], "one of the arguments config --list is required"),
-        (["sweep", "nope"], "no shipped experiment has that name; shipped: clearance, guarded, quick"),
+        (["sweep", "nope"], "no shipped experiment has that name; shipped: clearance, contact, guarded, quick"),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
             ["run", "--controller", "nope"],
@@ -237,8 +237,8 @@ def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str])
     assert main(["sweep", "--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     names = [line.split()[0] for line in lines]
-    assert names == ["clearance", "guarded", "quick"]
-    assert lines[2].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
+    assert names == ["clearance", "contact", "guarded", "quick"]
+    assert lines[3].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
 
 
 def test_sweep_resolves_a_shipped_name_unless_a_file_exists(

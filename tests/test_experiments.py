@@ -201,3 +201,119 @@ def test_tuple_gains_with_gain_scale_run_to_a_report(tmp_path: Path) -> None:
     assert row["controller"] == "impedance" and float(row["gain_scale"]) != 1.0
     assert 0.9 <= float(row["gain_scale"]) <= 1.1
     assert (out / "summary.csv").is_file() and "## Summary" in (out / "report.md").read_text()
+
+
+# -- contact studies: strategies and grids -----------------------------------------------------
+def test_contact_comparison_crosses_controllers_strategies_and_the_grid() -> None:
+    exp = load_experiment(CONFIGS / "contact.yaml")
+    jobs = expand(exp)
+    arms = list(dict.fromkeys(j.arm for j in jobs))
+    assert len(arms) == len(exp.controllers) * len(exp.strategies) >= 5
+    assert "pd/straight" in arms and "impedance/spiral" in arms
+    cells = list(dict.fromkeys(tuple(sorted(j.cell.items())) for j in jobs))
+    assert len(cells) == 6
+    assert len(jobs) == len(arms) * 6 * len(exp.seeds) and len({j.key for j in jobs}) == len(jobs)
+    job = next(j for j in jobs if j.arm == "impedance/tilt" and j.cell["task.lateral_error"] == 0.003)
+    cfg = job.config
+    assert cfg.task.name == "held_insertion" and cfg.task.strategy == "tilt"  # type: ignore[attr-defined]
+    assert cfg.task.lateral_error == 0.003  # type: ignore[attr-defined]
+    assert cfg.scene.assets.clearance == 0.0001 and cfg.scene.assets.chamfer == 0.001
+    assert cfg.physics.profile == "precision"
+
+
+def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.experiments.config import apply_experiment_overrides
+
+    data = apply_experiment_overrides(
+        read_mapping(CONFIGS / "contact.yaml"), ["task.lateral_error=0.002", "seeds=40"]
+    )
+    exp = experiment_from_mapping(data)
+    jobs = expand(exp)
+    assert {j.config.task.lateral_error for j in jobs} == {0.002}  # type: ignore[attr-defined]
+    assert len(exp.seeds) == 40 and len(jobs) == len(exp.controllers) * len(exp.strategies) * 2 * 40
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
+            "strategies[0]: must be one of straight, force, spiral, tilt, got 'poke'",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",
+            "grid.task.wobble: no such field in the episode config",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.lateral_error: [-1]}",
+            "task.lateral_error must be >= 0, got -1",
+        ),
+        ("controllers: [pd]\ngrid: {seed: [1, 2]}", "grid.seed: sweep this with controllers/strategies"),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.tilt_error: [0.01, 0.01]}",
+            "grid.task.tilt_error: repeated values [0.01, 0.01]",
+        ),
+        (
+            "controllers: [pd]\ngrid: {scene.assets.clearance: [0.001]}",
+            "grid.scene.assets.clearance: sweep this with controllers/strategies/planners/clearances",
+        ),
+        (
+            "controllers: [pd]\nphysics: {profile: precision}\nscene: {assets: {n_parts: 12}}",
+            "scene.assets.n_parts",
+        ),
+    ],
+)
+def test_bad_contact_studies_fail_in_one_line(text: str, message: str) -> None:
+    import yaml
+
+    from peg_ctrl.config import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        experiment_from_mapping(yaml.safe_load(text))
+    assert message in str(err.value)
+
+
+def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path: Path) -> None:
+    exp = experiment_from_mapping(
+        {
+            "name": "tiny",
+            "controllers": ["pd"],
+            "strategies": ["straight", "spiral"],
+            "clearances": [0.0001],
+            "seeds": 2,
+            "max_steps": 6000,
+            "task": {"name": "held_insertion"},
+            "scene": {"assets": {"chamfer": 0.001}},
+            "physics": {"profile": "precision"},
+            "grid": {"task.lateral_error": [0.0005, 0.002]},
+        }
+    )
+    rows = run_sweep(exp, tmp_path, workers=2, progress=False)
+    assert len(rows) == 8
+    header = (tmp_path / "episodes.csv").read_text().splitlines()[0].split(",")
+    for column in (
+        "arm",
+        "strategy",
+        "task.lateral_error",
+        "first_contact_s",
+        "contact_to_seat_s",
+        "contact_impulse_ns",
+        "max_tilt_rad",
+        "search_distance_m",
+        "end_state",
+        "lateral_error_m",
+        "tilt_rad",
+        "insertion_depth_m",
+        "peak_any_contact_force_n",
+        "max_penetration_m",
+        "sim_time_s",
+    ):
+        assert column in header, column
+    assert {r["arm"] for r in rows} == {"pd/straight", "pd/spiral"}
+    assert all(r["end_state"] in ("seated", "missed", "jammed", "wedged") for r in rows)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Success per grid cell" in report and "## Which arms differ" in report
+    for name in ("success_vs_disturbance.png", "force_vs_depth.png", "peak_force.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name

@@ -2,20 +2,42 @@
 
 A task resets the scene from a random generator, turns observations into gripper targets, and
 evaluates named metrics and success or failure after every control step (ManiSkill's
-``evaluate()``). It never steps or forwards the simulation: the loop owns time.
+``evaluate()``). It never steps or forwards the simulation during an episode: the loop owns
+time. (Building the initial state in :meth:`Task.reset` may simulate, as the held-insertion
+task closes the jaw on its peg; the episode's clock starts after it.)
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Protocol
+import dataclasses
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
 
 import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.state import ControlState, PegObservation
 
-__all__ = ["Observation", "Evaluation", "Task", "PhaseRecord", "close_open_record"]
+if TYPE_CHECKING:
+    from peg_ctrl.jaw import JawCalibration
+    from peg_ctrl.planners.base import MotionLimits, Planner
+    from peg_ctrl.scene import SceneConfig
+
+__all__ = [
+    "Observation",
+    "Evaluation",
+    "Task",
+    "TaskSpec",
+    "TaskContext",
+    "PhaseRecord",
+    "close_open_record",
+    "DEFAULT_TASK",
+]
+
+#: The task a config gets when its ``task`` mapping names none.
+DEFAULT_TASK = "pick_and_place"
 
 
 class Observation(NamedTuple):
@@ -104,3 +126,59 @@ class Task(Protocol):
     def finish(self, t: float, outcome: str) -> None:
         """The episode ended at ``t`` [s] with ``outcome``: close the open phase record."""
         ...
+
+
+class TaskContext(NamedTuple):
+    """What every task is built with, besides its own config (from the episode's config)."""
+
+    scene: SceneConfig
+    success: Any  # peg_ctrl.tasks.pick_and_place.SuccessConfig
+    randomization: Any  # peg_ctrl.tasks.pick_and_place.RandomizationConfig
+    planner: Planner
+    limits: MotionLimits
+    jaw: JawCalibration
+    control_dt: float = 0.001  # the controller's period [s]
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """Base of every task's config: a frozen dataclass with a registered ``name``.
+
+    ``task: {name: held_insertion, strategy: spiral}`` in a config file picks the class from
+    :data:`peg_ctrl.tasks.TASKS`; a mapping without ``name`` means :data:`DEFAULT_TASK`.
+    """
+
+    name: ClassVar[str]
+
+    def build(self, context: TaskContext) -> Task:
+        """The task this config describes."""
+        raise NotImplementedError(f"{type(self).__name__} does not build a task")
+
+    def check(self, scene: SceneConfig) -> None:
+        """Raise :class:`ConfigError` if this task cannot run in ``scene`` (default: it can)."""
+
+    @classmethod
+    def select(cls, data: object, *, prefix: str = "task.") -> TaskSpec:
+        """The config named by ``data``: a name, a mapping ``{"name": ..., <fields>}`` or a config.
+
+        Raises:
+            UnknownComponent: for a name that is not a registered task (the message lists them).
+            ConfigError: for a bad field name or value, naming it as ``<prefix><field>``.
+        """
+        from peg_ctrl.config import load
+        from peg_ctrl.tasks import TASKS  # here: the registry imports this module
+
+        where = prefix.rstrip(".") or "task"
+        if isinstance(data, TaskSpec):
+            return data
+        if isinstance(data, str):
+            data = {"name": data}
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{where}: expected a task name or a mapping, got {data!r}")
+        fields = dict(data)
+        name = fields.pop("name", DEFAULT_TASK)
+        if not isinstance(name, str):
+            raise ConfigError(f"{prefix}name: expected a string, got {name!r}")
+        if name not in TASKS:
+            raise UnknownComponent("task", name, TASKS, where=f"{prefix}name")
+        return load(TASKS[name], fields, prefix=prefix)

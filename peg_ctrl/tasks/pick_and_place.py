@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -43,12 +44,13 @@ from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.rotations import quat_mul, rotate_inv
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
 
 __all__ = [
     "PHASES",
     "TaskConfig",
+    "PickAndPlaceConfig",
     "SuccessConfig",
     "RandomizationConfig",
     "PickAndPlaceTask",
@@ -60,8 +62,10 @@ SETTLED_FOR = 0.2  # the peg must stay slower than settle_speed this long [s]
 
 
 @dataclasses.dataclass(frozen=True)
-class TaskConfig:
+class TaskConfig(TaskSpec):
     """Tolerances [m, rad, jaw bytes] and time budgets [s] of the state machine (SPEC §6 defaults)."""
+
+    name: ClassVar[str] = "pick_and_place"
 
     rotation_error: float = 0.1  # rotate is done below this orientation error [rad]
     alignment_distance: float = 0.005  # align is done below this peg-to-hole XY error [m]
@@ -97,6 +101,20 @@ class TaskConfig:
         if not 0.0 < self.insert_speed_scale <= 1.0:
             raise ConfigError(f"task.insert_speed_scale must be in (0, 1], got {self.insert_speed_scale}")
 
+    def build(self, context: TaskContext) -> PickAndPlaceTask:
+        return PickAndPlaceTask(
+            scene=context.scene,
+            config=self,
+            success=context.success,
+            randomization=context.randomization,
+            planner=context.planner,
+            limits=context.limits,
+            jaw=context.jaw,
+        )
+
+
+PickAndPlaceConfig = TaskConfig  # the name in the task family
+
 
 @dataclasses.dataclass(frozen=True)
 class SuccessConfig:
@@ -108,7 +126,7 @@ class SuccessConfig:
     consecutive_steps: int = 100  # control steps the three must hold in a row
     force_spike: float = 150.0  # any contact force above this fails the episode [N]
     max_in_hand_tilt: float = 0.35  # peg rotation in the pads since the grasp [rad]
-    grasp_lost_distance: float = 0.02  # peg centre to pinch point while held [m]
+    grasp_lost_distance: float = 0.02  # peg moved this far in the pads while held: grasp lost [m]
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

@@ -21,7 +21,7 @@ from ..conftest import HOME, target
 def test_scaled_scales_its_gains_and_the_inner_pd() -> None:
     cfg = AdmittanceConfig(stiffness=200.0, inner=PDConfig(kp_pos=1000.0))
     scaled = cfg.scaled(0.9)
-    assert AdmittanceConfig.GAINS == ("stiffness",)
+    assert AdmittanceConfig.GAINS == ("stiffness", "rot_stiffness")
     assert scaled.stiffness == 200.0 * 0.9
     assert scaled.inner == cfg.inner.scaled(0.9)
     assert scaled.inner.kp_pos == 1000.0 * 0.9
@@ -114,3 +114,26 @@ def test_closed_loop_sees_no_force_in_free_space(model: mujoco.MjModel) -> None:
     tracker = Tracker(model, controller)
     tracker.hold(target(HOME, euler_to_quat(1.2, 0.0, 0.4)), 2.0)
     assert np.linalg.norm(controller.external_force(tracker.state(), np.zeros(3))) < 0.05
+
+
+def test_closed_loop_sees_no_torque_in_free_space(model: mujoco.MjModel) -> None:
+    """The gripper's own weight is taken out of the torque as well (centre of mass from the model)."""
+    controller = AdmittanceController(model, AdmittanceConfig(compliance_center=(0.0, 0.0, -0.07)))
+    tracker = Tracker(model, controller)
+    tracker.hold(target(HOME, euler_to_quat(0.4, 0.3, 0.4)), 2.0)
+    _, torque = controller.external_wrench(tracker.state(), np.zeros(3))
+    assert np.linalg.norm(torque) < 0.01
+
+
+def test_rotational_admittance_turns_like_a_spring(model: mujoco.MjModel) -> None:
+    cfg = AdmittanceConfig(rotational=True, rot_stiffness=4.0)
+    controller = AdmittanceController(model, cfg)
+    tracker = Tracker(model, controller)
+    goal = target(HOME)
+    tracker.hold(goal, 0.5)
+    body = model.body("2f85/base").id
+    tracker.data.xfrc_applied[body, 3:] = [0.0, 0.2, 0.0]  # a pure torque about world y [N m]
+    tracker.hold(goal, 2.0)
+    expected = (0.2 - cfg.torque_deadband) / cfg.rot_stiffness
+    assert controller.rotation[1] == pytest.approx(expected, rel=0.15)
+    assert abs(controller.rotation[0]) < 0.1 * expected and abs(controller.rotation[2]) < 0.1 * expected

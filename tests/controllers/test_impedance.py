@@ -57,3 +57,42 @@ def test_pinch_jacobian_is_the_identity_at_home(
     """The pinch point is the ball joint's centre, as the module docstring says."""
     jac = impedance.dynamics.pinch_jacobian(home_state.p_world, home_state.quat_world)
     np.testing.assert_allclose(jac, np.eye(6), atol=1e-12)
+
+
+def test_compliance_center_must_be_three_finite_numbers() -> None:
+    with pytest.raises(ConfigError, match=r"impedance\.compliance_center: must be 3 finite numbers"):
+        ImpedanceConfig(compliance_center=(0.0, float("nan"), 0.0))
+    with pytest.raises(ConfigError, match=r"impedance\.damping_compensation: must be in \[0, 1\), got 1.0"):
+        ImpedanceConfig(damping_compensation=1.0)
+
+
+def _slides_and_ball(ctrl: object, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    ctrl = np.asarray(ctrl)
+    slides = [model.actuator(n).id for n in ("act_transX", "act_transY", "act_transZ")]
+    balls = [model.actuator(n).id for n in ("act_rotX", "act_rotY", "act_rotZ")]
+    return ctrl[slides], ctrl[balls]
+
+
+def test_a_turn_about_the_compliance_center_moves_no_force(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """Remote centre of compliance: a target turned about the centre (70 mm below the pinch)
+    asks for a torque and no net force; the same target with the centre at the pinch asks for a
+    force as well, since the pinch point itself has to move."""
+    centre = np.array([0.0, 0.0, -0.07])  # gripper frame = world frame at home
+    angle = 0.02
+    q = np.array([np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0])  # about world y
+    r = np.empty(3)
+    mujoco.mju_rotVecQuat(r, centre, q)
+    p_turned = home_state.p_world + centre - r  # keeps the centre where it is
+    forces = {}
+    for c_body in ((0.0, 0.0, 0.0), tuple(centre)):
+        cfg = ImpedanceConfig(compliance_center=c_body)  # type: ignore[arg-type]
+        c = ImpedanceController(model, cfg)
+        c.reset(home_state)
+        at_rest, _ = _slides_and_ball(c.compute(home_state, target(home_state.p_world)).ctrl, model)
+        turned, torque = _slides_and_ball(c.compute(home_state, target(p_turned, q)).ctrl, model)
+        forces[c_body] = turned - at_rest  # without the gravity feed-forward
+        assert abs(torque[1]) > 0.1
+    assert np.abs(forces[tuple(centre)]).max() < 1e-6
+    assert np.abs(forces[(0.0, 0.0, 0.0)]).max() > 1.0

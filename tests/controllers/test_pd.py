@@ -192,3 +192,16 @@ def test_large_rotation_takes_the_short_way(tracker: Tracker, sign: float) -> No
     yaw = np.unwrap(np.asarray(yaws))
     assert np.all(sign * np.diff(yaw) > -1e-6), "rotation reversed direction"
     assert yaw[-1] == pytest.approx(goal, abs=1e-3)
+
+
+def test_a_force_controlled_axis_pushes_with_the_commanded_force(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """z force-controlled at -3 N: the position error along z is ignored, x still tracked."""
+    c = PDController(model)
+    c.reset(home_state)
+    far = target(HOME + [0.001, 0.0, -0.05]).with_force([0.0, 0.0, -3.0])
+    ctrl = np.asarray(c.compute(home_state, far).ctrl)
+    weight = model.body_subtreemass[model.body("gripper_root").id] * 9.81
+    slides = [model.actuator(n).id for n in SLIDES]
+    np.testing.assert_allclose(ctrl[slides], [PDConfig().kp_pos * 0.001, 0.0, weight - 3.0], atol=1e-9)

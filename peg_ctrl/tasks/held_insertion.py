@@ -1,0 +1,622 @@
+"""The held-insertion task family: the peg starts in the hand above the hole and is inserted
+without letting go, by one of four insertion strategies.
+
+Task
+    The peg is held upright in the closed jaw (the pads ``grip_above_centre`` above its centre),
+    its lower end ``start_height`` above the hole mouth. The episode ends with success once the
+    peg is seated, still in the hand.
+
+Disturbances (``task.*``, drawn per seed from the reset's random generator)
+    ``lateral_error`` [m]: the peg axis meets the mouth plane this far from the hole axis, in a
+    direction drawn uniformly; the task believes it is centred, so this is the lateral error at
+    first contact (exactly, when ``position_noise`` is 0 and the strategy moves straight down).
+    ``tilt_error`` [rad]: the peg is tilted in the grasp by this angle, in the plane of the pads;
+    the gripper's yaw is drawn uniformly, so the tilt's direction is uniform. The task believes the
+    peg is upright in the hand. ``position_noise`` [m]: standard deviation of Gaussian noise on
+    the observed hole position (x and y); the task first moves to where it observes the hole.
+    The hole's size (``scene.assets.clearance``, ``scene.assets.chamfer``) and the physics
+    (``physics.profile``, ``precision`` for contact studies) are the scene's.
+
+What the task senses
+    The gripper's state (with any sensor noise) and the force/torque sensor at the gripper mount,
+    tared while the hand settles; never the true hole pose or the peg-block contact force. Its
+    idea of the peg's lower end comes from the nominal grasp; its depth from the block's height.
+
+Strategies (``task.strategy``), each a row set of the phase table
+    - ``straight``: ``approach`` (Ruckig) → ``push``: a position-controlled descent at
+      ``descent_speed`` to ``seat_margin`` below the seated depth, whatever the contact (the
+      stiff baseline).
+    - ``force``: ``approach`` → ``descend`` (Ruckig, at ``descent_speed``, until the sensed
+      contact force exceeds ``contact_force``) → ``insert``: a force-regulated push at
+      ``insert_force`` with the lateral position held.
+    - ``spiral``: ``approach`` → ``descend`` → ``search``: an Archimedean spiral about the observed
+      hole (pitch ``spiral_pitch``, below the chamfer's capture range, at ``spiral_speed``, out to
+      ``search_radius``) pressing down with ``search_force``, until the lower end is sensed inside
+      the bore → ``insert`` from there. A search that runs out of time (the spiral's length at its
+      speed) ends the episode.
+    - ``tilt``: ``approach`` with the peg tilted by ``tilt_angle`` (its lowest rim towards +x) and
+      that rim ``slide_start`` beyond the observed chamfer's edge → ``descend`` onto the top face →
+      ``slide`` towards -x pressing with ``search_force`` until the rim drops into the bore →
+      ``straighten`` (Ruckig, still pressing: the pinch point moves on the chord of the arc about
+      the lower end, which drifts by about 0.1 mm) → ``insert``. A slide that runs out of time
+      ends the episode.
+    In contact the strategies command a force along z (``GripperTarget.force_world``) and leave
+    the rest to the controller's compliance: each controller realises the force as documented in
+    its module (open loop for pd, impedance and diffik, closed loop on the sensor for admittance,
+    an effort bound in the QP for mpc).
+
+Success
+    Peg depth ≥ ``success.min_depth``, lateral error ≤ ``success.max_lateral_error`` and tilt ≤
+    ``success.max_tilt`` for ``success.consecutive_steps`` control steps in a row.
+
+Failure
+    When the strategy's last phase runs out of time, the peg's end state names the reason:
+    ``missed`` (its lower end never got past the chamfer into the bore), ``wedged`` (stuck in
+    the bore tilted to within 10 % of the two-point-contact limit for its depth) or ``jammed``
+    (stuck in the bore, less tilted: held by friction). The loop's monitors add ``force_spike``,
+    ``grasp_lost``, ``excessive_tilt`` (in the hand) and ``diverged``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import ClassVar
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
+from peg_ctrl.monitors import (
+    ENTRY_MARGIN,
+    InsertionMeasure,
+    InsertionMonitor,
+    SeatedCriterion,
+    classify_end_state,
+)
+from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
+from peg_ctrl.rotations import quat_mul, rotate
+from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout
+from peg_ctrl.tasks.pick_and_place import SuccessConfig
+
+__all__ = ["STRATEGIES", "PHASES", "HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
+
+STRATEGIES = ("straight", "force", "spiral", "tilt")
+PHASES = ("settle", "approach", "descend", "push", "search", "slide", "straighten", "insert", DONE)
+_FORCE_FILTER_HZ = 30.0  # low-pass on the sensed contact force [Hz]
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldInsertionConfig(TaskSpec):
+    """Disturbances [m, rad], strategy and its parameters [m, m/s, N, rad, s]."""
+
+    name: ClassVar[str] = "held_insertion"
+    strategy: str = "force"  # straight, force, spiral or tilt
+    lateral_error: float = 0.0015  # peg axis to hole axis at the mouth at first contact [m]
+    tilt_error: float = 0.0  # peg tilt in the grasp [rad]
+    position_noise: float = 0.0  # std of the observed hole position, x and y [m]
+    start_height: float = 0.003  # the peg's lower end above the mouth at the start [m]
+    grip_above_centre: float = 0.02  # pads above the peg's centre: the fingers clear the block [m]
+    settle_time: float = 0.3  # hold after the start while the sensor is tared [s]
+    descent_speed: float = 0.005  # guarded descent, and the straight push [m/s]
+    contact_force: float = 1.5  # sensed force that counts as contact [N]
+    insert_force: float = 3.0  # force-regulated push [N]
+    insert_speed: float = 0.01  # above this descent speed the push eases off, to 0 N at twice it [m/s]
+    search_force: float = 3.0  # pressing force while searching or sliding [N]
+    spiral_pitch: float = 0.0012  # radial step per turn of the spiral [m]
+    spiral_speed: float = 0.005  # along the spiral [m/s]
+    search_radius: float = 0.0045  # the spiral gives up beyond this radius [m]
+    tilt_angle: float = 0.12  # tilt of the tilt-and-slide strategy [rad]
+    turn_speed: float = 0.1  # straightening, about the peg's lower end [rad/s]
+    slide_start: float = 0.0045  # lowest rim this far beyond the observed chamfer edge [m]
+    slide_speed: float = 0.005  # [m/s]
+    seat_margin: float = 0.002  # the straight push aims this far below the seated depth [m]
+    insert_time: float = 8.0  # budget of the force-regulated insert [s] (the straight push: its
+    # motion and 1 s)
+
+    def __post_init__(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise ConfigError(f"task.strategy must be one of {', '.join(STRATEGIES)}, got {self.strategy!r}")
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, str):
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"task.{f.name} must be a finite number, got {value!r}")
+            if f.name in ("lateral_error", "tilt_error", "position_noise"):
+                if value < 0:
+                    raise ConfigError(f"task.{f.name} must be >= 0, got {value!r}")
+            elif value <= 0:
+                raise ConfigError(f"task.{f.name} must be > 0, got {value!r}")
+        if self.tilt_error >= 0.2:
+            raise ConfigError(f"task.tilt_error must be below 0.2 rad, got {self.tilt_error!r}")
+        if not 0.0 < self.tilt_angle < 0.5:
+            raise ConfigError(f"task.tilt_angle must be in (0, 0.5) rad, got {self.tilt_angle!r}")
+
+    def build(self, context: TaskContext) -> HeldInsertionTask:
+        return HeldInsertionTask(
+            scene=context.scene,
+            config=self,
+            success=context.success,
+            planner=context.planner,
+            limits=context.limits,
+            control_dt=context.control_dt,
+        )
+
+    def check(self, scene: SceneConfig) -> None:
+        a = scene.assets
+        rim = a.peg_radius * math.sin(self.tilt_error)  # the low rim below the lower end's centre
+        if self.start_height <= rim:
+            raise ConfigError(
+                f"task.start_height must be above the tilted rim's drop of {rim * 1e3:.2f} mm, "
+                f"got {self.start_height!r}"
+            )
+        if self.grip_above_centre >= 0.5 * a.peg_length - 0.01:
+            raise ConfigError(
+                f"task.grip_above_centre must leave 10 mm of peg above the pads (< "
+                f"{0.5 * a.peg_length - 0.01:g} m), got {self.grip_above_centre!r}"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class Disturbance:
+    """One seed's draw: lateral error direction and gripper yaw [rad], observation noise (x, y) [m]."""
+
+    lateral_direction: float
+    yaw: float
+    tilt_sign: float
+    noise: tuple[float, float]
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, position_noise: float) -> Disturbance:
+        direction, yaw = (float(v) for v in rng.uniform(0.0, 2.0 * math.pi, size=2))
+        sign = 1.0 if rng.uniform() < 0.5 else -1.0
+        nx, ny = (float(v) for v in rng.normal(0.0, 1.0, size=2) * position_noise)
+        return cls(direction, yaw, sign, (nx, ny))
+
+
+def _about_z(angle: float) -> NDArray[np.float64]:
+    return np.array([math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)])
+
+
+def _about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
+    q = np.empty(4)
+    mujoco.mju_axisAngle2Quat(q, axis, angle)
+    return q
+
+
+class _ContactSense:
+    """The contact force on the hand from the mount's force/torque sensor, tared, world frame."""
+
+    def __init__(self, control_dt: float = 0.001) -> None:
+        self.alpha = 1.0 - math.exp(-2.0 * math.pi * _FORCE_FILTER_HZ * control_dt)
+        self.tare = np.zeros(3)
+        self._tare_sum = np.zeros(3)
+        self._tare_n = 0
+        self.force = np.zeros(3)  # filtered contact force on the hand [N]
+
+    @staticmethod
+    def base_force(obs: Observation) -> NDArray[np.float64]:
+        f = obs.gripper.ft_wrench
+        out = np.empty(3)
+        mujoco.mju_rotVecQuat(out, np.array([f[0], -f[1], -f[2]]), obs.gripper.quat_world)
+        return out
+
+    def accumulate_tare(self, obs: Observation) -> None:
+        self._tare_sum += self.base_force(obs)
+        self._tare_n += 1
+        self.tare = self._tare_sum / self._tare_n
+
+    def update(self, obs: Observation) -> None:
+        contact = -(self.base_force(obs) - self.tare)
+        self.force += self.alpha * (contact - self.force)
+
+
+class HeldInsertionTask:
+    """Phases of one insertion strategy for a held peg; evaluates the insertion."""
+
+    name = "held_insertion"
+    phases: tuple[str, ...] = PHASES
+
+    def __init__(
+        self,
+        *,
+        scene: SceneConfig,
+        config: HeldInsertionConfig,
+        success: SuccessConfig,
+        planner: Planner,
+        limits: MotionLimits,
+        control_dt: float = 0.001,
+    ) -> None:
+        self.scene = scene
+        self.control_dt = control_dt
+        self.cfg = config
+        self.success_cfg = success
+        self.planner = planner
+        self.limits = limits
+        a = scene.assets
+        self.block_top = float(a.block_size[2])
+        self.radius = float(a.peg_radius)
+        self.hole_radius = float(a.peg_radius + a.clearance)
+        self.chamfer = float(a.chamfer)
+        self.insertion = InsertionMonitor(
+            scene, SeatedCriterion(success.min_depth, success.max_lateral_error, success.max_tilt)
+        )
+        self._sense = _ContactSense(self.control_dt)
+        self.machine = PhaseMachine(self.phase_table())
+        self.disturbance: Disturbance | None = None
+        self.observed_hole = np.zeros(2)  # where the task believes the hole is (x, y) [m]
+        self._b_body = np.zeros(3)  # nominal lower end of the peg, gripper frame [m]
+        self._up_body = np.zeros(3)  # nominal peg axis (up), gripper frame
+        self._goal = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
+        self._inserted_steps = 0
+        self.time_to_insert: float | None = None
+        self._pressing = _Pressing(self._goal, config.insert_force)
+
+    # -- the phase table ------------------------------------------------------------------------
+    def phase_table(self) -> dict[str, PhaseSpec]:
+        c = self.cfg
+        last = Timeout(c.insert_time)
+        settle = PhaseSpec(self._enter_hold, self._settled, "approach", tick=self._tare)
+        approach = PhaseSpec(
+            self._enter_approach, self._motion_done, self._after_approach, Timeout(1.0, True)
+        )
+        insert = PhaseSpec(self._enter_insert, _never, DONE, last, tick=self._govern)
+        if c.strategy == "straight":
+            return {
+                "settle": settle,
+                "approach": approach,
+                "push": PhaseSpec(self._enter_push, _never, DONE, Timeout(1.0, True)),
+            }
+        table = {
+            "settle": settle,
+            "approach": approach,
+            "descend": PhaseSpec(
+                self._enter_descend, self._touched, self._after_descend, Timeout(1.0, True), tick=self._feel
+            ),
+            "insert": insert,
+        }
+        if c.strategy == "spiral":
+            turns = c.search_radius / c.spiral_pitch
+            length = math.pi * c.search_radius * turns  # of the spiral out to the search radius
+            table["search"] = PhaseSpec(
+                self._enter_search,
+                self._in_bore,
+                self._after_search,
+                Timeout(length / c.spiral_speed),
+                tick=self._feel,
+            )
+        elif c.strategy == "tilt":
+            span = self.cfg.slide_start + 2.0 * (self.chamfer + 0.002)
+            table["slide"] = PhaseSpec(
+                self._enter_slide,
+                self._in_bore,
+                self._after_search,
+                Timeout(span / c.slide_speed),
+                tick=self._feel,
+            )
+            table["straighten"] = PhaseSpec(
+                self._enter_straighten, self._motion_done, "insert", Timeout(0.3, True), tick=self._feel
+            )
+        return table
+
+    # -- the Task interface -------------------------------------------------------------------
+    @property
+    def phase(self) -> str:
+        return self.machine.phase
+
+    @property
+    def grasped(self) -> bool:
+        return True
+
+    @property
+    def records(self) -> list[PhaseRecord]:
+        return self.machine.records
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Draw the disturbances; place the peg in the closed hand above the hole."""
+        c, scene = self.cfg, self.scene
+        d = self.disturbance = Disturbance.draw(rng, c.position_noise)
+        q_grip = quat_mul(_about_z(d.yaw), Q_TURN)
+        # Tilt in the plane of the pads: about the jaw's closing direction (the gripper's x).
+        closing = rotate(q_grip, np.array([1.0, 0.0, 0.0]))
+        q_peg = quat_mul(
+            _about(closing, d.tilt_sign * c.tilt_error), quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
+        )
+        up = rotate(q_peg, np.array([0.0, 0.0, 1.0]))
+        up = up if up[2] > 0 else -up
+        hx, hy = scene.hole_xy
+        mouth = np.array(
+            [
+                hx + c.lateral_error * math.cos(d.lateral_direction),
+                hy + c.lateral_error * math.sin(d.lateral_direction),
+                self.block_top,
+            ]
+        )
+        bottom = mouth + (c.start_height / up[2]) * up
+        rig = HeldRig(model)
+        pinch, _ = place_held_peg(
+            model,
+            data,
+            rig,
+            scene,
+            bottom=bottom,
+            q_grip=q_grip,
+            q_peg=q_peg,
+            grip_above_centre=c.grip_above_centre,
+        )
+        close_on_held_peg(model, data, rig, pinch, q_grip)
+        data.time = 0.0  # the closing builds the start state; the episode's clock starts here
+        # The nominal grasp (peg upright in the hand), in the gripper frame.
+        half = 0.5 * scene.assets.peg_length
+        b_world = -(c.grip_above_centre + half) * np.array([0.0, 0.0, 1.0]) + rotate(
+            q_grip, np.array([0.0, 0.0, -GRASP_OFFSET])
+        )
+        q_inv = np.array([q_grip[0], -q_grip[1], -q_grip[2], -q_grip[3]])
+        self._b_body = rotate(q_inv, b_world)
+        self._up_body = rotate(q_inv, np.array([0.0, 0.0, 1.0]))
+        believed_bottom = pinch + b_world
+        self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
+        self._sense = _ContactSense(self.control_dt)
+        self.machine = PhaseMachine(self.phase_table())
+        self._inserted_steps = 0
+        self.time_to_insert = None
+
+    def start(self, obs: Observation) -> None:
+        s = obs.gripper
+        self._goal = Waypoint.of(s.p_world, s.quat_world, 0.0)
+        self.machine.start("settle", obs)
+
+    def target(self, obs: Observation) -> GripperTarget:
+        return self.machine.update(obs)
+
+    def evaluate(self, obs: Observation) -> Evaluation:
+        m = self.insertion.measure(obs.peg)
+        if self.insertion.criterion(m):
+            self._inserted_steps += 1
+            if self.time_to_insert is None:
+                self.time_to_insert = obs.t
+        else:
+            self._inserted_steps = 0
+            self.time_to_insert = None
+        if self._inserted_steps >= self.success_cfg.consecutive_steps:
+            self.finish(obs.t, "inserted")
+            return Evaluation(True, True, "", "seated", m)
+        if self.machine.phase == DONE:
+            state = self.end_state(m)
+            detail = (
+                f"peg {state} (depth {m.depth_m * 1e3:.1f} mm, lateral {m.lateral_error_m * 1e3:.2f} mm, "
+                f"tilt {math.degrees(m.tilt_rad):.2f} deg)"
+            )
+            return Evaluation(True, False, state, detail, m)
+        return Evaluation(False, False, "", "", m)
+
+    def finish(self, t: float, outcome: str) -> None:
+        self.machine.close_record(t, outcome)
+
+    def end_state(self, m: InsertionMeasure) -> str:
+        """``missed``, ``jammed`` or ``wedged`` for a peg that is not seated (see the module docstring)."""
+        return classify_end_state(
+            m, clearance=self.hole_radius - self.radius, chamfer=self.chamfer, radius=self.radius
+        )
+
+    # -- what the task believes -------------------------------------------------------------------
+    def believed_bottom(self, obs: Observation) -> NDArray[np.float64]:
+        """The peg's lower end (centre) from the gripper pose and the nominal grasp [m]."""
+        return obs.gripper.p_world + rotate(obs.gripper.quat_world, self._b_body)
+
+    def believed_depth(self, obs: Observation) -> float:
+        """Depth below the mouth of the lowest point of the peg's lower face, as believed [m]."""
+        b = self.believed_bottom(obs)
+        up = rotate(obs.gripper.quat_world, self._up_body)
+        lowest = b[2] - self.radius * math.sqrt(max(0.0, 1.0 - up[2] * up[2]))
+        return self.block_top - lowest
+
+    def _pinch_for(self, bottom: NDArray[np.float64], q_grip: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The pinch position that puts the nominal lower end at ``bottom`` with orientation ``q_grip``."""
+        return bottom - rotate(q_grip, self._b_body)
+
+    # -- motions ------------------------------------------------------------------------------
+    def _move(self, goal: Waypoint, limits: MotionLimits | None = None) -> Motion:
+        trajectory = self.planner.plan(self._goal, goal, limits or self.limits)
+        self._goal = goal
+        return trajectory
+
+    def _slow(self) -> MotionLimits:
+        return self.limits.scaled(self.cfg.descent_speed / self.limits.v_lin)
+
+    def _enter_hold(self, obs: Observation) -> Motion:
+        return self._move(self._goal)
+
+    def _tilted(self) -> NDArray[np.float64]:
+        """The gripper orientation that tilts the peg by ``tilt_angle`` with its lowest rim towards +x."""
+        q0 = np.asarray(self._goal.quat_world)
+        return quat_mul(_about(np.array([0.0, 1.0, 0.0]), self.cfg.tilt_angle), q0)
+
+    def _enter_approach(self, obs: Observation) -> Motion:
+        """Over the observed hole, the lower end ``start_height`` above the mouth (for ``tilt``:
+        tilted, the lowest rim ``slide_start`` beyond the chamfer's edge along +x)."""
+        c = self.cfg
+        q = np.asarray(self._goal.quat_world)
+        target = np.array([*self.observed_hole, self.block_top + c.start_height])
+        if c.strategy == "tilt":
+            q = self._tilted()
+            a = c.tilt_angle
+            rim = self.hole_radius + self.chamfer + c.slide_start  # of the lowest rim from the axis
+            target[0] += rim - self.radius * math.cos(a)
+            target[2] += self.radius * math.sin(a)
+        return self._move(Waypoint.of(self._pinch_for(target, q), q, 0.0))
+
+    def _after_approach(self, obs: Observation) -> str:
+        return "push" if self.cfg.strategy == "straight" else "descend"
+
+    def _seated_goal(self) -> Waypoint:
+        g = self._goal
+        q = np.asarray(g.quat_world)
+        bottom = self.believed_bottom_of(g)
+        bottom[2] = self.block_top - self.success_cfg.min_depth - self.cfg.seat_margin
+        return Waypoint.of(self._pinch_for(bottom, q), q, 0.0)
+
+    def believed_bottom_of(self, w: Waypoint) -> NDArray[np.float64]:
+        return np.asarray(w.p_world) + rotate(np.asarray(w.quat_world), self._b_body)
+
+    def _enter_push(self, obs: Observation) -> Motion:
+        return self._move(self._seated_goal(), self._slow())
+
+    def _enter_descend(self, obs: Observation) -> Motion:
+        return self._move(self._seated_goal(), self._slow())
+
+    def _touched(self, obs: Observation) -> str | None:
+        if self._in_bore(obs):
+            return "entered"  # the chamfer guided the peg in: push
+        if self._sense.force[2] > self.cfg.contact_force:
+            return "contact"
+        return "no_contact" if self.machine.motion_over(obs.t) else None
+
+    def _after_descend(self, obs: Observation) -> str:
+        if self._in_bore(obs):  # already in: a tilted peg straightens first
+            return "straighten" if self.cfg.strategy == "tilt" else "insert"
+        return {"force": "insert", "spiral": "search", "tilt": "slide"}[self.cfg.strategy]
+
+    def _after_search(self, obs: Observation) -> str:
+        """Push if the search found the bore; a search that ran out of time has missed."""
+        if self._in_bore(obs):
+            return "straighten" if self.cfg.strategy == "tilt" else "insert"
+        return DONE
+
+    def _hold_here(self, obs: Observation) -> None:
+        """The last goal becomes the present pose (the motion ended in contact)."""
+        s = obs.gripper
+        self._goal = Waypoint.of(s.p_world, self._goal.quat_world, 0.0)
+
+    def _enter_insert(self, obs: Observation) -> Motion:
+        self._hold_here(obs)
+        self._pressing = _Pressing(self._goal, self.cfg.insert_force)
+        return self._pressing
+
+    def _govern(self, obs: Observation) -> None:
+        """Ease the push off above ``insert_speed``: a peg that drops freely down the bore
+        rattles against its walls, each tap a force spike."""
+        self._sense.update(obs)
+        c = self.cfg
+        excess = max(0.0, -float(obs.gripper.v_world[2]) - c.insert_speed)
+        self._pressing.set_force(c.insert_force * max(0.0, 1.0 - excess / c.insert_speed))
+
+    def _enter_search(self, obs: Observation) -> Motion:
+        self._hold_here(obs)
+        return _Spiral(self._goal, self.cfg.spiral_pitch, self.cfg.spiral_speed, self.cfg.search_force)
+
+    def _enter_slide(self, obs: Observation) -> Motion:
+        self._hold_here(obs)
+        return _Slide(self._goal, np.array([-1.0, 0.0, 0.0]), self.cfg.slide_speed, self.cfg.search_force)
+
+    def _enter_straighten(self, obs: Observation) -> Motion:
+        """Upright again, turning about the peg's lower end, pressing down."""
+        self._hold_here(obs)
+        g = self._goal
+        bottom = self.believed_bottom_of(g)
+        q_up = quat_mul(_about(np.array([0.0, 1.0, 0.0]), -self.cfg.tilt_angle), np.asarray(g.quat_world))
+        goal = Waypoint.of(self._pinch_for(bottom, q_up), q_up, 0.0)
+        trajectory = self.planner.plan(g, goal, self.limits.scaled(self.cfg.turn_speed / self.limits.v_rot))
+        self._goal = goal
+        return _Pressed(trajectory, self.cfg.search_force)
+
+    # -- guards and hooks -----------------------------------------------------------------------
+    def _tare(self, obs: Observation) -> None:
+        self._sense.accumulate_tare(obs)
+
+    def _feel(self, obs: Observation) -> None:
+        self._sense.update(obs)
+
+    def _settled(self, obs: Observation) -> str | None:
+        return "ok" if self.machine.elapsed(obs.t) >= self.cfg.settle_time else None
+
+    def _motion_done(self, obs: Observation) -> str | None:
+        return "ok" if self.machine.motion_over(obs.t) else None
+
+    def _in_bore(self, obs: Observation) -> str | None:
+        return "entered" if self.believed_depth(obs) > self.chamfer + ENTRY_MARGIN else None
+
+
+def _never(obs: Observation) -> None:
+    return None
+
+
+def _down(force: float) -> NDArray[np.float64]:
+    return np.array([0.0, 0.0, -force])
+
+
+class _Pressing:
+    """Hold ``at`` laterally and in orientation, pushing down with ``force`` [N] (adjustable)."""
+
+    duration = 0.0
+
+    def __init__(self, at: Waypoint, force: float) -> None:
+        self._at = at
+        self.set_force(force)
+
+    def set_force(self, force: float) -> None:
+        # A force of exactly 0 would hand z back to position control: keep a token push.
+        at = self._at
+        self._target = GripperTarget.trusted(
+            at.p_world, at.quat_world, np.zeros(3), np.zeros(3), 0.0, _down(max(force, 1e-3))
+        )
+
+    def sample(self, t: float) -> GripperTarget:
+        return self._target
+
+
+class _Pressed:
+    """A planned motion with a downward force on z."""
+
+    def __init__(self, trajectory: Motion, force: float) -> None:
+        self.trajectory = trajectory
+        self.duration = trajectory.duration
+        self._force = _down(force)
+
+    def sample(self, t: float) -> GripperTarget:
+        return self.trajectory.sample(t).with_force(self._force)
+
+
+class _Spiral:
+    """An Archimedean spiral ``r = pitch theta / 2 pi`` about ``at``, at ``speed`` [m/s] along
+    the path, pressing down with ``force`` [N]."""
+
+    def __init__(self, at: Waypoint, pitch: float, speed: float, force: float) -> None:
+        self.centre = np.asarray(at.p_world)
+        self.quat = np.asarray(at.quat_world)
+        self.a = pitch / (2.0 * math.pi)
+        self.speed = speed
+        self.duration = 0.0  # open-ended: the phase's guard or time budget ends it
+        self._force = _down(force)
+
+    def sample(self, t: float) -> GripperTarget:
+        # Arc length s = a theta^2 / 2 (to first order) at constant speed.
+        theta = math.sqrt(2.0 * self.speed * max(t, 0.0) / self.a)
+        r = self.a * theta
+        c, s = math.cos(theta), math.sin(theta)
+        p = self.centre + np.array([r * c, r * s, 0.0])
+        rate = self.speed / math.sqrt(self.a * self.a + r * r)  # d theta / dt
+        v = np.array([self.a * c - r * s, self.a * s + r * c, 0.0]) * rate
+        return GripperTarget.trusted(p, self.quat, v, np.zeros(3), 0.0, self._force)
+
+
+class _Slide:
+    """A straight slide from ``at`` along ``direction`` at ``speed`` [m/s], pressing down with ``force``."""
+
+    def __init__(self, at: Waypoint, direction: NDArray[np.float64], speed: float, force: float) -> None:
+        self.start = np.asarray(at.p_world)
+        self.quat = np.asarray(at.quat_world)
+        self.v = direction * speed
+        self.duration = 0.0  # open-ended: the phase's guard or time budget ends it
+        self._force = _down(force)
+
+    def sample(self, t: float) -> GripperTarget:
+        return GripperTarget.trusted(
+            self.start + self.v * t, self.quat, self.v, np.zeros(3), 0.0, self._force
+        )

@@ -1,0 +1,188 @@
+"""The held-insertion task: its config, its start state, and its strategies run in the physics."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from peg_ctrl.config import ConfigError, apply_overrides
+from peg_ctrl.episode import EpisodeResult, build_loop, episode_config_from_mapping, run_episode
+from peg_ctrl.errors import UnknownComponent
+from peg_ctrl.monitors import InsertionMeasure, classify_end_state
+from peg_ctrl.tasks import TASKS, HeldInsertionConfig
+from peg_ctrl.tasks.pick_and_place import TaskConfig
+
+#: The peg's lower end in the gripper frame for the held grasp: a remote centre of compliance.
+TIP = [0.0, -0.07, -0.01]
+RCC = {"name": "impedance", "compliance_center": TIP, "k_pos": [1000, 1000, 1500], "k_rot": [2, 2, 2]}
+BASE: dict[str, Any] = {
+    "task": {"name": "held_insertion"},
+    "physics": {"profile": "precision"},
+    "scene": {
+        "assets": {"clearance": 0.0001, "chamfer": 0.001},
+        "peg_friction": [0.3, 0.1, 1e-4],
+        "block_friction": [0.3, 0.1, 1e-4],
+    },
+}
+
+
+def config(*sets: str, **extra: Any) -> Any:
+    data = apply_overrides({**BASE, **extra}, list(sets))
+    return episode_config_from_mapping(data)
+
+
+def run(tmp_path: Path, *sets: str, **extra: Any) -> EpisodeResult:
+    return run_episode(config(*sets, **extra), tmp_path / "ep", plot=False)
+
+
+# -- config ------------------------------------------------------------------------------------
+def test_the_task_family_is_chosen_by_name() -> None:
+    assert set(TASKS) == {"pick_and_place", "held_insertion"}
+    assert isinstance(config().task, HeldInsertionConfig)
+    default = episode_config_from_mapping({"task": {"force_guarded_insert": True}})
+    assert isinstance(default.task, TaskConfig) and default.task.force_guarded_insert
+
+
+@pytest.mark.parametrize(
+    ("sets", "message"),
+    [
+        (
+            ["task.strategy=wiggle"],
+            "task.strategy must be one of straight, force, spiral, tilt, got 'wiggle'",
+        ),
+        (["task.lateral_error=-0.001"], "task.lateral_error must be >= 0, got -0.001"),
+        (["task.tilt_error=0.3"], "task.tilt_error must be below 0.2 rad, got 0.3"),
+        (["task.spiral_pitch=0"], "task.spiral_pitch must be > 0, got 0"),
+        (["task.search_force=oops"], "task.search_force: expected a number, got 'oops'"),
+    ],
+)
+def test_bad_task_values_are_named(sets: list[str], message: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        config(*sets)
+    assert message in str(err.value)
+
+
+def test_an_unknown_task_lists_the_known_ones() -> None:
+    with pytest.raises(
+        UnknownComponent, match="task.name: unknown task 'peel'; known: held_insertion, pick_and_place"
+    ):
+        episode_config_from_mapping({"task": {"name": "peel"}})
+
+
+# -- the start state ---------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_start_has_the_configured_lateral_error_and_tilt(seed: int) -> None:
+    cfg = config(f"seed={seed}", "task.lateral_error=0.002", "task.tilt_error=0.02618")
+    loop = build_loop(cfg)
+    loop.reset(np.random.default_rng(seed))
+    m = loop.task.insertion.measure(loop.peg)  # type: ignore[attr-defined]
+    assert loop.data.time == 0.0
+    assert m.lateral_error_m == pytest.approx(0.002, abs=2e-5)  # the jaw closing moves it by microns
+    assert m.tilt_rad == pytest.approx(0.02618, abs=2e-3)
+    assert -m.depth_m == pytest.approx(0.003, abs=1e-4)  # start_height above the mouth
+    jaw = loop.state().jaw_sep_m
+    assert jaw == pytest.approx(2 * cfg.scene.assets.peg_radius, abs=2e-3)  # closed on the peg
+
+
+def test_directions_are_drawn_per_seed_and_repeat_with_it() -> None:
+    def draw(seed: int) -> tuple[float, float, float]:
+        loop = build_loop(config(f"seed={seed}"))
+        loop.reset(np.random.default_rng(seed))
+        d = loop.task.disturbance  # type: ignore[attr-defined]
+        return d.lateral_direction, d.yaw, d.tilt_sign
+
+    assert draw(3) == draw(3)
+    assert len({draw(s)[0] for s in range(4)}) == 4
+
+
+def test_position_noise_moves_the_observed_hole() -> None:
+    loops = []
+    for noise in (0.0, 0.001):
+        loop = build_loop(config("seed=5", f"task.position_noise={noise}"))
+        loop.reset(np.random.default_rng(5))
+        loops.append(loop.task)
+    d = loops[1].disturbance  # type: ignore[attr-defined]
+    shift = loops[1].observed_hole - loops[0].observed_hole  # type: ignore[attr-defined]
+    np.testing.assert_allclose(shift, d.noise, atol=1e-12)
+    assert 0.0 < float(np.hypot(*shift)) < 0.005
+
+
+# -- end states --------------------------------------------------------------------------------
+def _measure(depth: float, tilt: float) -> InsertionMeasure:
+    return InsertionMeasure(depth, 0.0, 0.0, 0.0, tilt, 0.0)
+
+
+def test_end_states_follow_the_bore_geometry() -> None:
+    geometry = {"clearance": 1e-4, "chamfer": 1e-3, "radius": 0.01}
+    assert classify_end_state(_measure(0.0012, 0.0), **geometry) == "missed"  # on the chamfer
+    # 10 mm into the bore a 0.1 mm clearance allows 1.15 deg of tilt.
+    assert classify_end_state(_measure(0.011, math.radians(1.1)), **geometry) == "wedged"
+    assert classify_end_state(_measure(0.011, math.radians(0.5)), **geometry) == "jammed"
+
+
+# -- strategies in the physics -----------------------------------------------------------------
+def test_straight_push_with_a_stiff_hand_fails_beyond_the_chamfer(tmp_path: Path) -> None:
+    r = run(tmp_path, "task.strategy=straight", "task.lateral_error=0.0015", "controller=pd")
+    assert r.status == "failure"
+    assert r.end_state == "missed"
+    assert r.insertion_depth_m < 0.001
+    assert r.peak_contact_force_n > 30.0  # the position push drives into the top face
+
+
+def test_spiral_search_finds_the_hole_beyond_the_chamfer(tmp_path: Path) -> None:
+    r = run(tmp_path, "task.strategy=spiral", "task.lateral_error=0.0015", controller=RCC)
+    assert r.status == "success", r.detail
+    assert r.end_state == "seated"
+    assert r.insertion_depth_m >= 0.04
+    assert r.search_distance_m > 0.001  # it travelled to find the hole
+    assert r.first_contact_s is not None and r.contact_to_seat_s is not None
+    assert r.contact_to_seat_s == pytest.approx(r.time_to_insert_s - r.first_contact_s)
+    assert r.contact_impulse_ns > 0.0
+    phases = [p["phase"] for p in r.phases]
+    assert phases[:5] == ["start", "settle", "approach", "descend", "search"]
+    assert "insert" in phases
+
+
+def test_force_strategy_regulates_the_push_with_the_admittance(tmp_path: Path) -> None:
+    """On the flat top (1.5 mm off, beyond the chamfer), closed-loop force regulation settles
+    at the commanded 3 N."""
+    r = run(
+        tmp_path,
+        "task.strategy=force",
+        "task.lateral_error=0.0015",
+        "task.insert_time=1.5",
+        controller={"name": "admittance"},
+    )
+    assert r.status == "failure" and r.reason == "missed"
+    with np.load(r.trace_path) as npz:
+        columns = [str(c) for c in npz["columns"]]
+        data = npz["data"]
+    t = data[:, columns.index("t")]
+    force = data[:, columns.index("block-peg")]
+    late = force[t > t[-1] - 0.5]
+    assert float(np.median(late)) == pytest.approx(3.0, abs=0.3)
+
+
+def test_the_mpc_force_limit_bounds_a_position_push(tmp_path: Path) -> None:
+    """A stiff position push onto the top face: the MPC's effort bound holds the quasi-static
+    contact force at its limit; without it the push is far harder."""
+    medians = []
+    for limit in (8.0, 1000.0):
+        r = run(
+            tmp_path / str(limit),
+            "task.strategy=straight",
+            "task.lateral_error=0.0015",
+            controller={"name": "mpc", "force_limit": limit},
+        )
+        with np.load(r.trace_path) as npz:
+            columns = [str(c) for c in npz["columns"]]
+            data = npz["data"]
+        t = data[:, columns.index("t")]
+        force = data[:, columns.index("block-peg")]
+        medians.append(float(np.median(force[t > t[-1] - 0.5])))
+    assert medians[0] == pytest.approx(8.0, abs=1.0)
+    assert medians[1] > 3 * medians[0]
