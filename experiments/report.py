@@ -142,25 +142,9 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
     plt.close(fig)
     made.append(("Force profiles", "force_profiles.png"))
 
-    # 2. Success rate vs clearance with Wilson intervals.
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
-    for ctrl in controllers:
-        pts = sorted((s["clearance_m"], s) for s in summary if s["controller"] == ctrl)
-        x = np.array([p[0] for p in pts]) * 1e3
-        y = np.array([p[1]["success_rate"] for p in pts])
-        lo = np.clip(y - np.array([p[1]["success_ci95_low"] for p in pts]), 0.0, None)
-        hi = np.clip(np.array([p[1]["success_ci95_high"] for p in pts]) - y, 0.0, None)
-        ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, color=colours[ctrl], label=ctrl)
-    ax.set_xscale("log")
-    ax.set_xlabel("radial hole clearance [mm]")
-    ax.set_ylabel("success rate (95 % Wilson interval)")
-    ax.set_ylim(-0.05, 1.05)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / "success_vs_clearance.png")
-    plt.close(fig)
-    made.append(("Success rate vs clearance", "success_vs_clearance.png"))
+    # 2. Success rate vs clearance with Wilson intervals (when the sweep has more than one).
+    if len({s["clearance_m"] for s in summary}) > 1:
+        made.append(_success_vs_clearance(out_dir, summary, controllers, colours))
 
     # 3. Peak peg-block force per controller.
     fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
@@ -191,6 +175,31 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
     made.append(("Failure reasons by phase", "failures.png"))
     made += _contact_plots(out_dir, rows, controllers, colours)
     return made
+
+
+def _success_vs_clearance(
+    out_dir: Path, summary: list[dict[str, Any]], controllers: list[str], colours: dict[str, str]
+) -> tuple[str, str]:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
+    for ctrl in controllers:
+        pts = sorted((s["clearance_m"], s) for s in summary if s["controller"] == ctrl)
+        x = np.array([p[0] for p in pts]) * 1e3
+        y = np.array([p[1]["success_rate"] for p in pts])
+        lo = np.clip(y - np.array([p[1]["success_ci95_low"] for p in pts]), 0.0, None)
+        hi = np.clip(np.array([p[1]["success_ci95_high"] for p in pts]) - y, 0.0, None)
+        ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, color=colours[ctrl], label=ctrl)
+    ax.set_xscale("log")
+    ax.set_xlabel("radial hole clearance [mm]")
+    ax.set_ylabel("success rate (95 % Wilson interval)")
+    ax.set_ylim(-0.05, 1.05)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out_dir / "success_vs_clearance.png")
+    plt.close(fig)
+    return ("Success rate vs clearance", "success_vs_clearance.png")
 
 
 def _condition_success(rows: list[dict[str, Any]], arm: str, column: str) -> list[tuple[float, int, int]]:

@@ -87,7 +87,10 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
         (["sweep"], "one of the arguments config --list is required"),
-        (["sweep", "nope"], "no shipped experiment has that name; shipped: clearance, contact, guarded, quick"),
+        (
+            ["sweep", "nope"],
+            "no shipped experiment has that name; shipped: clearance, contact, guarded, quick",
+        ),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
             ["run", "--controller", "nope"],
