@@ -245,7 +245,7 @@ def _contact_plots(
                 ax.errorbar(
                     x,
                     y,
-                    yerr=[y - ci[:, 0], ci[:, 1] - y],
+                    yerr=[np.clip(y - ci[:, 0], 0.0, None), np.clip(ci[:, 1] - y, 0.0, None)],  # round-off
                     marker="o",
                     capsize=3,
                     color=colours[arm],

@@ -102,6 +102,33 @@ def test_report_handles_all_successes(tmp_path: Path) -> None:
     assert "success_vs_clearance.png" in names and (tmp_path / "success_vs_clearance.png").is_file()
 
 
+@pytest.mark.parametrize("n", [5, 10, 20])
+def test_success_vs_disturbance_handles_all_successes(tmp_path: Path, n: int) -> None:
+    """5/5 has a Wilson upper bound a round-off below 1: the error bars must still draw."""
+    from peg_ctrl.experiments.report import _plots, summarise
+
+    rows = [
+        {
+            "arm": "pd/spiral",
+            "controller": "pd",
+            "task": "pick_and_place",
+            "planner": "ruckig",
+            "clearance_m": 0.0001,
+            "status": "success",
+            "reason": "",
+            "phase": "",
+            "peak_contact_force_n": 5.0,
+            "time_to_insert_s": 4.0,
+            "log_path": "episodes/x/log.jsonl",
+            "task.lateral_error": e,
+        }
+        for e in (0.0005, 0.003)
+        for _ in range(n)
+    ]
+    names = [name for _, name in _plots(tmp_path, rows, summarise(rows))]
+    assert "success_vs_disturbance.png" in names and (tmp_path / "success_vs_disturbance.png").is_file()
+
+
 def test_wilson_interval() -> None:
     lo, hi = wilson_interval(19, 20)
     assert lo == pytest.approx(0.7639, abs=1e-3) and hi == pytest.approx(0.9911, abs=1e-3)
