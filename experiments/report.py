@@ -352,7 +352,8 @@ def _comparison_section(rows: list[dict[str, Any]]) -> list[str]:
         "## Which arms differ",
         "",
         "Pairs of controller+planner at the same clearance. Success: Boschloo exact test; peak "
-        "peg-block force and time to insert (successes only): Mann-Whitney U. All p-values are "
+        "peg-block force and time to insert (successes only; for held insertion the time from the "
+        "first contact to seated): Mann-Whitney U. All p-values are "
         f"two-sided and Holm-corrected over the pairs at that clearance; bold: p < {ALPHA}. Intervals "
         "in the summary: Wilson (success), percentile bootstrap of the median (force, time).",
         "",

@@ -82,3 +82,24 @@ def test_compare_arms_finds_the_pair_that_differs() -> None:
 def test_compare_arms_only_compares_within_a_clearance() -> None:
     rows = _rows("a", 10, 10, 1.0, 1e-3) + _rows("b", 0, 10, 1.0, 1e-4)
     assert compare_arms(rows) == []
+
+
+def test_held_insertion_times_are_from_first_contact() -> None:
+    """Held insertion compares the time from first contact to seated, not from the start."""
+    rows = [
+        {
+            "controller": arm,
+            "planner": "ruckig",
+            "clearance_m": "0.0001",
+            "status": "success",
+            "task": "held_insertion",
+            "peak_contact_force_n": "10",
+            "time_to_insert_s": str(5.0 + 0.01 * i),  # the same in both arms
+            "contact_to_seat_s": str(seat + 0.01 * i),
+        }
+        for arm, seat in (("a", 1.0), ("b", 3.0))
+        for i in range(10)
+    ]
+    (pair,) = compare_arms(rows)
+    assert pair.time_median_a == pytest.approx(1.045) and pair.time_median_b == pytest.approx(3.045)
+    assert pair.p_time is not None and pair.p_time < ALPHA
