@@ -45,7 +45,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import quat_mul, rotate
+from peg_ctrl.rotations import cross, quat_mul, rotate
 from peg_ctrl.scene import FT_SITE, HOME_KEY
 from peg_ctrl.state import ControlState
 
@@ -169,7 +169,7 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
         com = rotate(q, self._com_body)
         centre = rotate(q, self._centre_body)
         weight = self._mass_below * self._gravity
-        tau = -t_world - np.cross(com - site, weight) + np.cross(site - centre, f_ext)
+        tau = -t_world - cross(com - site, weight) + cross(site - centre, f_ext)
         return f_ext, tau
 
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
@@ -233,7 +233,7 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
             arm = -rotate(q_ref, self._centre_body)  # pinch point relative to the reference centre
             p_cmd = p_cmd + rotate(q_rot, arm) - arm
             q_cmd = quat_mul(q_rot, q_ref)
-            v_cmd = v_cmd + np.cross(self.rotation_rate, rotate(q_rot, arm))
+            v_cmd = v_cmd + cross(self.rotation_rate, rotate(q_rot, arm))
             q_inv = np.array([q_cmd[0], -q_cmd[1], -q_cmd[2], -q_cmd[3]])
             omega = omega + rotate(q_inv, self.rotation_rate)
         if axes.any():

@@ -37,7 +37,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort, InvalidField
 from peg_ctrl.controllers.dynamics import BaseDynamics
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import rotate
+from peg_ctrl.rotations import cross, rotate
 from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS
 from peg_ctrl.state import ControlState
 
@@ -110,7 +110,7 @@ class ImpedanceController(ControllerBase[ImpedanceConfig]):
         mujoco.mju_subQuat(self._err, q_d, q)
         e[3:] = self._err
         de = np.empty(6)
-        de[:3] = (target.v_world + np.cross(omega_d, r_d)) - (state.v_world + np.cross(omega, r))
+        de[:3] = (target.v_world + cross(omega_d, r_d)) - (state.v_world + cross(omega, r))
         de[3:] = target.omega_body - state.omega_body
         wrench = self._k * e
         f = np.asarray(target.force_world)
@@ -124,7 +124,7 @@ class ImpedanceController(ControllerBase[ImpedanceConfig]):
             wrench[:3][forced] = f[forced]
         wrench += self._d * de
         force = wrench[:3]
-        torque = rotate(q, wrench[3:]) + np.cross(r, force)  # about the pinch point, world
+        torque = rotate(q, wrench[3:]) + cross(r, force)  # about the pinch point, world
         jac = self.dynamics.pinch_jacobian(state.p_world, q)
         # J maps (v, omega_body) to world twist; the angular rows act on body rates through R.
         tau = jac.T @ np.concatenate([force, torque])

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["quat_mul", "rotate", "rotate_inv"]
+__all__ = ["quat_mul", "rotate", "rotate_inv", "cross"]
 
 
 def quat_mul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -28,3 +28,11 @@ def rotate_inv(quat: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.
     q_inv = np.empty(4)
     mujoco.mju_negQuat(q_inv, quat)
     return rotate(q_inv, v)
+
+
+def cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a x b`` for 3-vectors: the same arithmetic as ``np.cross``, without its axis handling
+    (~40 µs a call at 1 kHz control, where this runs a few times per step)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
