@@ -47,7 +47,7 @@ from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.jaw import JawCalibration
 from peg_ctrl.rotations import cross, quat_mul, rotate
 from peg_ctrl.scene import FT_SITE, HOME_KEY
-from peg_ctrl.state import ControlState
+from peg_ctrl.state import ControlState, ft_world
 
 __all__ = ["AdmittanceConfig", "AdmittanceController"]
 
@@ -146,23 +146,13 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
         self.reset_offset()
         self.inner.reset(state)
 
-    def _sensor_world(self, state: ControlState) -> tuple[np.ndarray, np.ndarray]:
-        """Sensor force [N] and torque [N m] in the world frame (what the base exerts on the gripper)."""
-        f, t = state.ft_wrench[:3], state.ft_wrench[3:]
-        # sensor frame -> gripper frame is 180 degrees about X
-        return (
-            rotate(state.quat_world, np.array([f[0], -f[1], -f[2]])),
-            rotate(state.quat_world, np.array([t[0], -t[1], -t[2]])),
-        )
-
     def external_force(self, state: ControlState, accel_ref: np.ndarray) -> np.ndarray:
         """Contact force on the gripper from the sensor, world frame [N] (unfiltered)."""
-        f_world, _ = self._sensor_world(state)
-        return self._mass_below * (accel_ref - self._gravity) - f_world
+        return self.external_wrench(state, accel_ref)[0]
 
     def external_wrench(self, state: ControlState, accel_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and its torque about the centre of compliance [N m], world frame."""
-        f_world, t_world = self._sensor_world(state)
+        f_world, t_world = ft_world(state)
         f_ext = self._mass_below * (accel_ref - self._gravity) - f_world
         q = state.quat_world
         site = rotate(q, self._site_body)  # relative to the pinch point

@@ -15,7 +15,7 @@ import abc
 import dataclasses
 import math
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
 
 import mujoco
@@ -274,23 +274,16 @@ class ControllerConfig:
             UnknownComponent: for a name not in the registry (the message lists the known ones).
             ConfigError: for a bad field name or value, naming it as ``<prefix><field>``.
         """
-        from peg_ctrl.config import load
+        from peg_ctrl.config import load, named_fields
         from peg_ctrl.controllers import REGISTRY  # here: the registry imports this module
 
-        where = prefix.rstrip(".") or "controller"
         if isinstance(data, ControllerConfig):
             if not isinstance(data, cls):
+                where = prefix.rstrip(".") or "controller"
                 raise ConfigError(f"{where}: expected a {cls.__name__}, got {type(data).__name__}")
             return data
-        if isinstance(data, str):
-            data = {"name": data}
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{where}: expected a controller name or a mapping, got {data!r}")
-        fields = dict(data)
         default = cls.__dict__.get("name", DEFAULT_CONTROLLER)
-        name = fields.pop("name", default)
-        if not isinstance(name, str):
-            raise ConfigError(f"{prefix}name: expected a string, got {name!r}")
+        name, fields = named_fields(data, kind="controller", default=default, prefix=prefix)
         if name not in REGISTRY:
             raise UnknownComponent("controller", name, REGISTRY, where=prefix.rstrip("."))
         config_cls = REGISTRY[name]

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.experiments.stats import ALPHA, compare_arms, median_ci
+from peg_ctrl.monitors import FIRST_CONTACT_N
 
 __all__ = ["wilson_interval", "summarise", "write_report", "read_rows"]
 
@@ -300,7 +301,7 @@ def _trace(episode_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
     if "peg_depth_m" not in columns or len(data) == 0:
         return None
     force = data[:, columns.index("block-peg")]
-    touched = np.flatnonzero(force > 0.05)
+    touched = np.flatnonzero(force > FIRST_CONTACT_N)
     if len(touched) == 0:
         return None
     start = int(touched[0])

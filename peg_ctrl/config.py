@@ -24,7 +24,16 @@ from typing import Any, TypeVar, Union
 
 from peg_ctrl.errors import ConfigError
 
-__all__ = ["ConfigError", "load", "load_file", "read_mapping", "to_dict", "is_selectable", "apply_overrides"]
+__all__ = [
+    "ConfigError",
+    "load",
+    "load_file",
+    "read_mapping",
+    "to_dict",
+    "is_selectable",
+    "apply_overrides",
+    "named_fields",
+]
 
 T = TypeVar("T")
 
@@ -209,6 +218,21 @@ def _convert(hint: Any, value: Any, path: str) -> Any:
             raise ConfigError(f"{path}: must be one of {', '.join(map(repr, args))}, got {value!r}")
         return value
     return value
+
+
+def named_fields(data: object, *, kind: str, default: str, prefix: str) -> tuple[str, dict[str, Any]]:
+    """The ``name`` and the other fields of a selectable config written as a bare name or as a
+    mapping with a ``name`` key (``default`` when it has none); errors name ``prefix``."""
+    if isinstance(data, str):
+        data = {"name": data}
+    if not isinstance(data, Mapping):
+        where = prefix.rstrip(".") or kind
+        raise ConfigError(f"{where}: expected a {kind} name or a mapping, got {data!r}")
+    fields = dict(data)
+    name = fields.pop("name", default)
+    if not isinstance(name, str):
+        raise ConfigError(f"{prefix}name: expected a string, got {name!r}")
+    return name, fields
 
 
 def is_selectable(hint: Any) -> bool:

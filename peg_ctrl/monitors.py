@@ -35,9 +35,11 @@ __all__ = [
     "GraspMonitor",
     "DivergenceMonitor",
     "ContactHistory",
+    "SeatedHold",
     "classify_end_state",
     "END_STATES",
     "ENTRY_MARGIN",
+    "FIRST_CONTACT_N",
     "WEDGED_FRACTION",
 ]
 
@@ -121,6 +123,29 @@ class InsertionMonitor:
 
     def inserted(self, peg: PegObservation) -> bool:
         return self.criterion(self.measure(peg))
+
+
+class SeatedHold:
+    """How long an insertion criterion has held: ``count`` control steps in a row since
+    ``since`` [s] (None while it does not hold); :meth:`update` says when ``steps`` are reached."""
+
+    def __init__(self, steps: int) -> None:
+        self.steps = steps
+        self.reset()
+
+    def reset(self) -> None:
+        self.count = 0
+        self.since: float | None = None
+
+    def update(self, t: float, holds: bool) -> bool:
+        if holds:
+            self.count += 1
+            if self.since is None:
+                self.since = t
+        else:
+            self.count = 0
+            self.since = None
+        return self.count >= self.steps
 
 
 class ContactMonitor:
@@ -215,6 +240,7 @@ def classify_end_state(m: InsertionMeasure, *, clearance: float, chamfer: float,
     return "wedged" if m.tilt_rad >= WEDGED_FRACTION * limit else "jammed"
 
 
+FIRST_CONTACT_N = 0.05  # peg-block force that counts as contact [N]
 TRAVEL_STEP = 1e-4  # lateral travel is counted in moves of at least this [m]: chatter is not travel
 
 
@@ -223,7 +249,7 @@ class ContactHistory:
     (sampled at the control rate), the largest peg tilt [rad] and the lateral travel of the
     peg's lower end [m] (the search distance, counted in moves of :data:`TRAVEL_STEP` or more)."""
 
-    def __init__(self, threshold: float = 0.05) -> None:
+    def __init__(self, threshold: float = FIRST_CONTACT_N) -> None:
         self.threshold = threshold  # peg-block force that counts as contact [N]
         self.reset()
 

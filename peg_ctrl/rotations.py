@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["quat_mul", "rotate", "rotate_inv", "cross"]
+__all__ = ["quat_mul", "rotate", "rotate_inv", "cross", "yaw_quat"]
 
 
 def quat_mul(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -28,6 +30,11 @@ def rotate_inv(quat: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.
     q_inv = np.empty(4)
     mujoco.mju_negQuat(q_inv, quat)
     return rotate(q_inv, v)
+
+
+def yaw_quat(yaw: float) -> NDArray[np.float64]:
+    """The rotation by ``yaw`` [rad] about world Z."""
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
 
 def cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -32,6 +32,7 @@ __all__ = [
     "PAIRS",
     "PEG_PARTNERS",
     "BLOCK_PEG",
+    "ft_world",
 ]
 
 BODY_GROUPS = ("gripper", "peg", "block", "table")
@@ -80,6 +81,16 @@ class PegObservation(NamedTuple):
     bottom_world: NDArray[np.float64]
     speed: float
     force_block: float
+
+
+def ft_world(state: ControlState) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The force/torque sensor's reading in the world frame: the force [N] and torque [N m] that
+    the base exerts on the gripper (sensor frame -> gripper frame is 180 degrees about X)."""
+    f, t = state.ft_wrench[:3], state.ft_wrench[3:]
+    force, torque = np.empty(3), np.empty(3)
+    mujoco.mju_rotVecQuat(force, np.array([f[0], -f[1], -f[2]]), state.quat_world)
+    mujoco.mju_rotVecQuat(torque, np.array([t[0], -t[1], -t[2]]), state.quat_world)
+    return force, torque
 
 
 @dataclasses.dataclass(frozen=True)

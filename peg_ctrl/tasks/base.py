@@ -10,14 +10,13 @@ task closes the jaw on its peg; the episode's clock starts after it.)
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
 
 import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.errors import ConfigError, UnknownComponent
+from peg_ctrl.errors import UnknownComponent
 from peg_ctrl.state import ControlState, PegObservation
 
 if TYPE_CHECKING:
@@ -165,20 +164,12 @@ class TaskSpec:
             UnknownComponent: for a name that is not a registered task (the message lists them).
             ConfigError: for a bad field name or value, naming it as ``<prefix><field>``.
         """
-        from peg_ctrl.config import load
+        from peg_ctrl.config import load, named_fields
         from peg_ctrl.tasks import TASKS  # here: the registry imports this module
 
-        where = prefix.rstrip(".") or "task"
         if isinstance(data, TaskSpec):
             return data
-        if isinstance(data, str):
-            data = {"name": data}
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{where}: expected a task name or a mapping, got {data!r}")
-        fields = dict(data)
-        name = fields.pop("name", DEFAULT_TASK)
-        if not isinstance(name, str):
-            raise ConfigError(f"{prefix}name: expected a string, got {name!r}")
+        name, fields = named_fields(data, kind="task", default=DEFAULT_TASK, prefix=prefix)
         if name not in TASKS:
             raise UnknownComponent("task", name, TASKS, where=f"{prefix}name")
         return load(TASKS[name], fields, prefix=prefix)

@@ -75,11 +75,13 @@ from peg_ctrl.monitors import (
     InsertionMeasure,
     InsertionMonitor,
     SeatedCriterion,
+    SeatedHold,
     classify_end_state,
 )
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
-from peg_ctrl.rotations import quat_mul, rotate
+from peg_ctrl.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.state import ft_world
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout
 from peg_ctrl.tasks.pick_and_place import SuccessConfig
@@ -180,10 +182,6 @@ class Disturbance:
         return cls(direction, yaw, sign, (nx, ny))
 
 
-def _about_z(angle: float) -> NDArray[np.float64]:
-    return np.array([math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)])
-
-
 def _about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
     q = np.empty(4)
     mujoco.mju_axisAngle2Quat(q, axis, angle)
@@ -200,20 +198,13 @@ class _ContactSense:
         self._tare_n = 0
         self.force = np.zeros(3)  # filtered contact force on the hand [N]
 
-    @staticmethod
-    def base_force(obs: Observation) -> NDArray[np.float64]:
-        f = obs.gripper.ft_wrench
-        out = np.empty(3)
-        mujoco.mju_rotVecQuat(out, np.array([f[0], -f[1], -f[2]]), obs.gripper.quat_world)
-        return out
-
     def accumulate_tare(self, obs: Observation) -> None:
-        self._tare_sum += self.base_force(obs)
+        self._tare_sum += ft_world(obs.gripper)[0]
         self._tare_n += 1
         self.tare = self._tare_sum / self._tare_n
 
     def update(self, obs: Observation) -> None:
-        contact = -(self.base_force(obs) - self.tare)
+        contact = -(ft_world(obs.gripper)[0] - self.tare)
         self.force += self.alpha * (contact - self.force)
 
 
@@ -254,8 +245,7 @@ class HeldInsertionTask:
         self._b_body = np.zeros(3)  # nominal lower end of the peg, gripper frame [m]
         self._up_body = np.zeros(3)  # nominal peg axis (up), gripper frame
         self._goal = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
-        self._inserted_steps = 0
-        self.time_to_insert: float | None = None
+        self.seated = SeatedHold(success.consecutive_steps)
         self._pressing = _Pressing(self._goal, config.insert_force)
 
     # -- the phase table ------------------------------------------------------------------------
@@ -318,11 +308,16 @@ class HeldInsertionTask:
     def records(self) -> list[PhaseRecord]:
         return self.machine.records
 
+    @property
+    def time_to_insert(self) -> float | None:
+        """When the seated hold that succeeded (or is under way) began [s]."""
+        return self.seated.since
+
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
         """Draw the disturbances; place the peg in the closed hand above the hole."""
         c, scene = self.cfg, self.scene
         d = self.disturbance = Disturbance.draw(rng, c.position_noise)
-        q_grip = quat_mul(_about_z(d.yaw), Q_TURN)
+        q_grip = quat_mul(yaw_quat(d.yaw), Q_TURN)
         # Tilt in the plane of the pads: about the jaw's closing direction (the gripper's x).
         closing = rotate(q_grip, np.array([1.0, 0.0, 0.0]))
         q_peg = quat_mul(
@@ -357,15 +352,13 @@ class HeldInsertionTask:
         b_world = -(c.grip_above_centre + half) * np.array([0.0, 0.0, 1.0]) + rotate(
             q_grip, np.array([0.0, 0.0, -GRASP_OFFSET])
         )
-        q_inv = np.array([q_grip[0], -q_grip[1], -q_grip[2], -q_grip[3]])
-        self._b_body = rotate(q_inv, b_world)
-        self._up_body = rotate(q_inv, np.array([0.0, 0.0, 1.0]))
+        self._b_body = rotate_inv(q_grip, b_world)
+        self._up_body = rotate_inv(q_grip, np.array([0.0, 0.0, 1.0]))
         believed_bottom = pinch + b_world
         self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
         self._sense = _ContactSense(self.control_dt)
         self.machine = PhaseMachine(self.phase_table())
-        self._inserted_steps = 0
-        self.time_to_insert = None
+        self.seated.reset()
 
     def start(self, obs: Observation) -> None:
         s = obs.gripper
@@ -377,14 +370,7 @@ class HeldInsertionTask:
 
     def evaluate(self, obs: Observation) -> Evaluation:
         m = self.insertion.measure(obs.peg)
-        if self.insertion.criterion(m):
-            self._inserted_steps += 1
-            if self.time_to_insert is None:
-                self.time_to_insert = obs.t
-        else:
-            self._inserted_steps = 0
-            self.time_to_insert = None
-        if self._inserted_steps >= self.success_cfg.consecutive_steps:
+        if self.seated.update(obs.t, self.insertion.criterion(m)):
             self.finish(obs.t, "inserted")
             return Evaluation(True, True, "", "seated", m)
         if self.machine.phase == DONE:

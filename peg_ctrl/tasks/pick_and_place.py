@@ -40,9 +40,9 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import ConfigError, EpisodeFailure
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion
+from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion, SeatedHold
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
-from peg_ctrl.rotations import quat_mul, rotate_inv
+from peg_ctrl.rotations import quat_mul, rotate_inv, yaw_quat
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
@@ -161,12 +161,8 @@ def initial_qpos(
         yaw = float(rng.uniform(-randomization.peg_yaw, randomization.peg_yaw))
         x, y = x + dx, y + dy
     qpos[adr : adr + 3] = [x, y, scene.assets.peg_radius]
-    qpos[adr + 3 : adr + 7] = quat_mul(_yaw_quat(yaw), np.asarray(PEG_LYING_QUAT))
+    qpos[adr + 3 : adr + 7] = quat_mul(yaw_quat(yaw), np.asarray(PEG_LYING_QUAT))
     return qpos
-
-
-def _yaw_quat(yaw: float) -> NDArray[np.float64]:
-    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
 
 class PickAndPlaceTask:
@@ -199,12 +195,11 @@ class PickAndPlaceTask:
         )
         self.machine = PhaseMachine(self.phase_table())
         self._goal = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
-        self._yaw = _yaw_quat(0.0)
+        self._yaw = yaw_quat(0.0)
         self._settled_since: float | None = None
         self._grasped = False  # between a successful grasp and the jaw opening
         self._released = False
-        self._inserted_steps = 0
-        self.time_to_insert: float | None = None
+        self.seated = SeatedHold(success.consecutive_steps)
 
     def phase_table(self) -> dict[str, PhaseSpec]:
         """The phases: how each is entered, its guard, its time budget and what follows."""
@@ -254,12 +249,16 @@ class PickAndPlaceTask:
     def records(self) -> list[PhaseRecord]:
         return self.machine.records
 
+    @property
+    def time_to_insert(self) -> float | None:
+        """When the seated hold that succeeded (or is under way) began [s]."""
+        return self.seated.since
+
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
         data.qpos[:] = initial_qpos(model, self.scene, self.randomization, rng)
         self._settled_since = None
         self._grasped = self._released = False
-        self._inserted_steps = 0
-        self.time_to_insert = None
+        self.seated.reset()
 
     def start(self, obs: Observation) -> None:
         """Plan the approach from the gripper's current pose, the jaw yawed across the peg."""
@@ -269,7 +268,7 @@ class PickAndPlaceTask:
         # symmetric, so take the smallest turn.
         ax, ay = float(obs.peg.axis_world[0]), float(obs.peg.axis_world[1])
         yaw = (math.atan2(-ax, ay) + math.pi / 2) % math.pi - math.pi / 2
-        self._yaw = _yaw_quat(yaw)
+        self._yaw = yaw_quat(yaw)
         self.machine.start("approach", obs)
 
     def target(self, obs: Observation) -> GripperTarget:
@@ -277,14 +276,7 @@ class PickAndPlaceTask:
 
     def evaluate(self, obs: Observation) -> Evaluation:
         m = self.insertion.measure(obs.peg)
-        if self._released and self.insertion.criterion(m):
-            self._inserted_steps += 1
-            if self.time_to_insert is None:
-                self.time_to_insert = obs.t
-        else:
-            self._inserted_steps = 0
-            self.time_to_insert = None
-        if self._inserted_steps >= self.success_cfg.consecutive_steps:
+        if self.seated.update(obs.t, self._released and self.insertion.criterion(m)):
             self.finish(obs.t, "inserted")
             return Evaluation(True, True, "", "inserted", m)
         if self.machine.phase == DONE:
