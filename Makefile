@@ -25,7 +25,7 @@ install: $(STAMP)
 ## demo: install, then run the main job: one autonomous episode, headless, with log, plot, video
 demo: $(STAMP) sysdeps
 	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
-	$(BIN)/peg-sim bench --controller pd --out $(OUT)/bench.json --steps 3000 --repeats 5
+	$(BIN)/peg-sim bench --controller pd --task default --out $(OUT)/bench.json --repeats 3 --throughput-episodes 0
 
 ## sysdeps: EGL/Mesa for offscreen rendering, installed only if missing (Debian, needs root)
 sysdeps:

@@ -51,6 +51,7 @@ class DiffIKConfig(ControllerConfig):
 
     name: ClassVar[str] = "diffik"
     GAINS: ClassVar[tuple[str, ...]] = ("position_cost", "orientation_cost")
+    control_dt: float = 0.005  # [s] 200 Hz: outcomes as at 1 kHz (docs/performance.md)
     ik_dt: float = 0.01  # IK period [s] (100 Hz), a whole multiple of control_dt
     solver: str = "daqp"  # any qpsolvers solver: daqp (default), osqp, ...
     position_cost: float = 1.0  # frame task weight on the position error

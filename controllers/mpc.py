@@ -73,6 +73,7 @@ class MPCConfig(ControllerConfig):
     name: ClassVar[str] = "mpc"
     GAINS: ClassVar[tuple[str, ...]] = ("q_pos", "q_rot")
     horizon: int = 15  # steps
+    control_dt: float = 0.005  # [s] 200 Hz: outcomes as at 1 kHz (docs/performance.md)
     mpc_dt: float = 0.01  # [s], a whole multiple of control_dt
     q_pos: float = 4.0e4  # weight on position error (translation) [1/m^2]
     q_vel: float = 10.0  # weight on velocity error [s^2/m^2]

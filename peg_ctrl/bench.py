@@ -1,10 +1,22 @@
-"""Benchmarks: the loop's overhead over raw physics, measured as a ratio in one run.
+"""Benchmarks: the loop's overhead over raw physics, by component, and sweep throughput.
 
-Method (so that both sides do exactly the same physics): a run of the one loop (a
-:class:`~peg_ctrl.tasks.tracking.TrackingTask`, or a whole episode) records the control
-sequence; the same sequence is then replayed with bare ``mj_step`` from the same initial state,
-which reproduces the trajectory bit for bit. Both are timed in alternating repetitions and the
-medians compared, so machine load affects both sides alike.
+Method (``peg-sim bench``):
+
+- **The same trajectory.** A whole episode (the task's phases, its contacts included) runs once
+  through the loop with a recorder of its controls; its raw replay is bare ``mj_step`` on the
+  same controls from the same initial state, which reproduces the trajectory bit for bit
+  (checked: the final state must be equal, or the benchmark refuses to report).
+- **Interleaved repeats.** Each repetition runs, back to back: the loop with its default
+  recording (force trace and step log, as ``peg-sim run`` writes them), the raw replay, and the
+  loop once more with each section timed (:class:`~peg_ctrl.loop.LoopTimer`, which costs a few
+  clock reads per control step, so it is kept out of the first measurement). Machine load hits
+  all three alike; min and median are reported.
+- **Clocks.** Loop and replay times are CPU time of the benchmarking process
+  (``time.process_time``: the logger's writer thread included). Sweep throughput is wall time
+  of a real sweep with 2 worker processes (start-up, model compilation and file writing
+  included).
+
+Overhead = loop time / replay time - 1, the median of the paired ratios of the repetitions.
 """
 
 from __future__ import annotations
@@ -13,6 +25,7 @@ import copy
 import json
 import platform
 import statistics
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -20,185 +33,183 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from peg_ctrl.commands import GripperTarget, euler_to_quat
-from peg_ctrl.controllers import make_controller
-from peg_ctrl.loop import Loop, StepInfo
-from peg_ctrl.scene import SceneConfig, build_model
-from peg_ctrl.tasks.tracking import TrackingTask
-from peg_ctrl.timing import control_decimation
+from peg_ctrl.episode_log import EpisodeLogger
+from peg_ctrl.loop import Loop, LoopTimer, Recorder, StepInfo
+from peg_ctrl.recorders import StepLogRecorder, TraceRecorder
 
-__all__ = ["bench_controller", "bench_profiles", "run_benchmarks"]
+__all__ = ["bench_episode", "bench_throughput", "bench_profiles", "run_benchmarks", "BENCH_TASKS"]
 
-
-def _solver_period_us(controller: Any) -> float:
-    """The period at which a controller runs its solver (its control period if it has none)."""
-    cfg = getattr(controller, "config", None)
-    for name in ("mpc_dt", "ik_dt"):
-        if cfg is not None and hasattr(cfg, name):
-            return float(getattr(cfg, name)) * 1e6
-    return float(controller.control_dt) * 1e6
-
-
-def _targets(n_steps: int) -> list[GripperTarget]:
-    """A representative motion: translate 10 cm and turn 95 degrees about X, then hold."""
-    out = []
-    start = np.array([-0.2, 0.0, 0.2])
-    for k in range(n_steps):
-        s = min(1.0, k / (0.6 * n_steps))
-        blend = 3 * s * s - 2 * s**3
-        p = start + blend * np.array([0.1, 0.05, -0.05])
-        out.append(
-            GripperTarget(
-                p_world=p, quat_world=euler_to_quat(blend * np.radians(95), 0.0, 0.0), jaw_sep_m=0.04
-            )
-        )
-    return out
+BENCH_TASKS = ("default", "contact")  # peg_ctrl.profile_check.TASKS
+TARGET_OVERHEAD = 0.10
 
 
 class _ControlLog:
-    """Recorder: the controls and diagnostics of every step."""
+    """Recorder: the controls of every control step."""
 
     def __init__(self) -> None:
         self.ctrl: list[np.ndarray] = []
-        self.solve_times: list[float] = []
-        self.solver_calls: list[float] = []
 
     def record(self, loop: Loop, info: StepInfo) -> None:
-        d = info.output.diagnostics
-        self.ctrl.append(np.asarray(info.output.ctrl))
-        self.solve_times.append(d.solve_time_s)
-        if d.status != "hold":  # a call that ran the controller's own solver
-            self.solver_calls.append(d.solve_time_s)
+        self.ctrl.append(np.array(info.output.ctrl, dtype=float))
 
 
-def bench_controller(
-    name: str, *, n_steps: int = 2000, repeats: int = 5, control_dt: float | None = None
-) -> dict[str, Any]:
-    """Time ``n_steps`` of physics with controller ``name`` in the loop vs the same physics alone.
+def _episode_config(controller: str, task: str, profile: str, seed: int, control_dt: float | None) -> Any:
+    import dataclasses
 
-    ``control_dt`` [s] overrides the controller's default control period.
-    """
-    model = build_model()
-    params = {} if control_dt is None else {"control_dt": control_dt}
-    controller = make_controller(name, model, **params)
-    decimation = control_decimation(controller.control_dt, model.opt.timestep)
-    targets = _targets(n_steps // decimation)
-    log = _ControlLog()
-    closed = Loop(
-        model=model, controller=controller, task=TrackingTask(sequence=targets), scene=SceneConfig()
-    )
-    closed.recorders = [log]
-    loop_times, raw_times = [], []
-    for rep in range(repeats):
-        closed.reset(np.random.default_rng(0))
-        qpos0 = closed.data.qpos.copy()
-        log.ctrl = []
-        t0 = time.thread_time()
-        for _ in targets:
-            closed.step()
-        loop_times.append(time.thread_time() - t0)
-        final_loop = closed.data.qpos.copy()
-        ctrl_log = log.ctrl
+    from peg_ctrl.controllers import REGISTRY
+    from peg_ctrl.profile_check import task_config
 
-        data = mujoco.MjData(model)
-        mujoco.mj_resetDataKeyframe(model, data, 0)
-        data.qpos[:] = qpos0
-        mujoco.mj_forward(model, data)
-        t0 = time.thread_time()
-        for ctrl in ctrl_log:
-            data.ctrl[:] = ctrl
-            mujoco.mj_step(model, data, nstep=closed.decimation)
-        raw_times.append(time.thread_time() - t0)
-        if rep == 0 and not np.array_equal(final_loop, data.qpos):
-            raise RuntimeError("replay diverged from the closed-loop run; benchmark is not comparable")
-    loop = statistics.median(loop_times)
-    raw = statistics.median(raw_times)
-    steps = len(targets) * closed.decimation
-    solve = np.asarray(log.solve_times)
-    solver_calls = log.solver_calls
-    return {
-        "controller": name,
-        "physics_steps": steps,
-        "repeats": repeats,
-        "raw_step_us_median": raw / steps * 1e6,
-        "loop_step_us_median": loop / steps * 1e6,
-        # Median of paired ratios: each repetition's loop and replay ran back to back.
-        "overhead_ratio": statistics.median(a / b for a, b in zip(loop_times, raw_times, strict=True)) - 1.0,
-        "solve_time_us_median": float(np.median(solve) * 1e6),
-        "solve_time_us_p99": float(np.percentile(solve, 99) * 1e6),
-        # Calls that solved (diffik's IK, mpc's QP) rather than held the last solution.
-        "solver_call_us_median": float(np.median(solver_calls) * 1e6) if solver_calls else None,
-        "solver_call_us_p99": float(np.percentile(solver_calls, 99) * 1e6) if solver_calls else None,
-        "solver_period_us": _solver_period_us(controller),
-        "control_period_us": controller.control_dt * 1e6,
-    }
+    cfg = task_config(task, profile, seed)
+    if cfg.controller.name != controller:  # the task's controller settings are for its own
+        cfg = dataclasses.replace(cfg, controller=REGISTRY[controller]())
+    if control_dt is not None:
+        cfg = dataclasses.replace(cfg, controller=dataclasses.replace(cfg.controller, control_dt=control_dt))
+    return cfg
+
+
+def _run(loop: Loop, cfg: Any, recorders: list[Recorder], *, reset: bool = True) -> tuple[float, float, int]:
+    """One episode through ``loop``: (CPU s, wall s, physics steps)."""
+    loop.recorders = recorders
+    if reset:
+        loop.reset(np.random.default_rng(cfg.seed))
+    limit = cfg.step_limit(loop.model.opt.timestep)
+    c0, w0 = time.process_time(), time.perf_counter()
+    loop.run(limit)
+    for r in recorders:
+        if isinstance(r, StepLogRecorder):
+            r.flush(loop)
+        elif isinstance(r, TraceRecorder):
+            r.flush()
+    return time.process_time() - c0, time.perf_counter() - w0, loop.steps
+
+
+def _recording(loop: Loop, tmp: Path) -> tuple[list[Recorder], EpisodeLogger]:
+    logger = EpisodeLogger(tmp)
+    return [TraceRecorder(logger, loop.task.phases), StepLogRecorder(logger, 50)], logger
 
 
 def bench_episode(
-    *, controller: str = "pd", planner: str = "ruckig", seed: int = 0, repeats: int = 3
+    controller: str,
+    *,
+    task: str = "default",
+    profile: str = "seed",
+    seed: int = 0,
+    repeats: int = 5,
+    control_dt: float | None = None,
 ) -> dict[str, Any]:
-    """A whole autonomous episode (controller + state machine + planner + logging) vs raw physics.
+    """One whole episode of ``task`` with ``controller`` in the loop vs its raw replay."""
+    from peg_ctrl.episode import build_loop
 
-    Each repetition runs the episode three ways on the same steps: with full logging, with
-    logging off (no trace, no step records), and as a bare ``mj_step`` replay of the episode's
-    own controls. ``logging_share`` is the part of the loop overhead that logging accounts for.
-    """
-    import dataclasses
-    import tempfile
+    cfg = _episode_config(controller, task, profile, seed, control_dt)
+    loop = build_loop(cfg)
+    model = loop.model
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    state0 = np.empty(mujoco.mj_stateSize(model, spec))
 
-    from peg_ctrl.controllers import REGISTRY
-    from peg_ctrl.episode import EpisodeConfig, LogConfig, RandomizationConfig, run_episode
-    from peg_ctrl.tasks.pick_and_place import initial_qpos
-
-    cfg = EpisodeConfig(
-        controller=REGISTRY[controller](),
-        planner=planner,
-        seed=seed,
-        randomization=RandomizationConfig(enabled=True),
-    )
-    quiet = dataclasses.replace(cfg, log=LogConfig(interval=10**9, trace=False))
-    model = build_model(cfg.scene)
-    full_t, quiet_t, raw_t = [], [], []
-    steps = 0
-    status = ""
-    for _ in range(repeats):
-        ctrls: list[np.ndarray] = []
-        decimation = [1]
-
-        def record(m: mujoco.MjModel, d: mujoco.MjData, ctrls: list[np.ndarray] = ctrls) -> None:
-            ctrls.append(d.ctrl.copy())
-
-        with tempfile.TemporaryDirectory() as tmp:
-            # Wall time of the loop itself (the writer thread works concurrently).
-            result = run_episode(cfg, Path(tmp) / "full", plot=False)
-            full_t.append(result.wall_time_s)
-            quiet_t.append(run_episode(quiet, Path(tmp) / "quiet", plot=False, on_step=record).wall_time_s)
-        steps, status = result.total_timesteps, result.status
-        decimation[0] = steps // max(1, len(ctrls))
+    def replay(ctrls: list[np.ndarray]) -> tuple[float, float, np.ndarray]:
         data = mujoco.MjData(model)
-        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
-        data.qpos[:] = initial_qpos(model, cfg.scene, cfg.randomization, np.random.default_rng(cfg.seed))
-        mujoco.mj_forward(model, data)
-        t0 = time.perf_counter()
+        mujoco.mj_setState(model, data, state0, spec)
+        c0, w0 = time.process_time(), time.perf_counter()
         for ctrl in ctrls:
             data.ctrl[:] = ctrl
-            mujoco.mj_step(model, data, nstep=decimation[0])
-        raw_t.append(time.perf_counter() - t0)
-    full, quiet_time, raw = (statistics.median(x) for x in (full_t, quiet_t, raw_t))
+            mujoco.mj_step(model, data, nstep=loop.decimation)
+        return time.process_time() - c0, time.perf_counter() - w0, data.qpos
+
+    loop_cpu: list[float] = []
+    loop_wall: list[float] = []
+    raw_cpu: list[float] = []
+    raw_wall: list[float] = []
+    sections: list[dict[str, float]] = []
+    outcome_steps: list[int] = []
+    with tempfile.TemporaryDirectory(prefix="peg_ctrl_bench_") as tmp:
+        _run(loop, cfg, [])  # warm-up (caches, solver set-up)
+        for rep in range(repeats):
+            # The loop with its recording, plus a recorder of its controls (one array copy per
+            # control step, counted against the loop), then the raw replay of exactly those.
+            recorders, logger = _recording(loop, Path(tmp) / f"loop{rep}")
+            log = _ControlLog()
+            loop.recorders = []
+            loop.reset(np.random.default_rng(cfg.seed))
+            mujoco.mj_getState(model, loop.data, state0, spec)
+            cpu, wall, steps = _run(loop, cfg, [*recorders, log], reset=False)
+            logger.close()
+            loop_cpu.append(cpu)
+            loop_wall.append(wall)
+            outcome_steps.append(steps)
+            cpu, wall, q = replay(log.ctrl)
+            if not np.array_equal(q, loop.data.qpos):
+                raise RuntimeError(f"{controller}: the raw replay diverged from the loop; not comparable")
+            raw_cpu.append(cpu)
+            raw_wall.append(wall)
+            recorders, logger = _recording(loop, Path(tmp) / f"timed{rep}")
+            loop.timer = LoopTimer()
+            _, _, timed_steps = _run(loop, cfg, recorders)
+            logger.close()
+            sections.append({name: sec / timed_steps * 1e6 for name, sec in loop.timer.seconds.items()})
+            loop.timer = None
+    outcome = loop.last
+    k = loop.decimation
+    # per physics step: each repetition's own step count
+    loop_us = [c / n * 1e6 for c, n in zip(loop_cpu, outcome_steps, strict=True)]
+    raw_us = [c / n * 1e6 for c, n in zip(raw_cpu, outcome_steps, strict=True)]
+    ratios = [a / b - 1.0 for a, b in zip(loop_cpu, raw_cpu, strict=True)]
+    components = {name: statistics.median(s[name] for s in sections) for name in LoopTimer.SECTIONS}
     return {
-        "what": "episode",
         "controller": controller,
-        "planner": planner,
-        "status": status,
-        "physics_steps": steps,
+        "task": task,
+        "profile": profile,
+        "seed": seed,
+        "status": ("success" if outcome.success else "failure") if outcome is not None else "",
+        "reason": outcome.reason if outcome is not None else "",
+        "control_hz": 1.0 / loop.control_dt,
+        "physics_steps": statistics.median(outcome_steps),
+        "physics_steps_per_control_step": k,
         "repeats": repeats,
-        "raw_step_us_median": raw / steps * 1e6,
-        "episode_step_us_median": full / steps * 1e6,
-        "episode_without_logging_step_us_median": quiet_time / steps * 1e6,
-        "overhead_ratio": statistics.median(a / b for a, b in zip(full_t, raw_t, strict=True)) - 1.0,
-        "logging_share_of_overhead": (full - quiet_time) / max(full - raw, 1e-12),
-        "note": "wall time of the loops; the quiet run also records its controls for the replay",
+        "raw_us_per_step": {"min": min(raw_us), "median": statistics.median(raw_us)},
+        "loop_us_per_step": {"min": min(loop_us), "median": statistics.median(loop_us)},
+        "overhead": {
+            "median": statistics.median(ratios),
+            "min": min(ratios),
+            "of_minimums": min(loop_us) / min(raw_us) - 1.0,
+        },
+        "wall_overhead_median": statistics.median(
+            a / b - 1.0 for a, b in zip(loop_wall, raw_wall, strict=True)
+        ),
+        # Per physics step, from the timed runs: sections of the loop (physics = the in-loop
+        # physics steps with their sensor copies).
+        "components_us_per_step": components,
+        "python_us_per_control_step": sum(v for n, v in components.items() if n != "physics") * k,
+        "within_target": statistics.median(ratios) <= TARGET_OVERHEAD,
     }
+
+
+def bench_throughput(
+    profiles: tuple[str, ...] = ("seed", "fast", "precision"), *, episodes: int = 20, workers: int = 2
+) -> list[dict[str, Any]]:
+    """Episodes per hour of a real sweep of the default task per profile on ``workers`` processes
+    (wall time; process start-up, compilation and file writing included)."""
+    from peg_ctrl.batch import run_batch
+    from peg_ctrl.profile_check import task_config
+
+    rows = []
+    for name in profiles:
+        with tempfile.TemporaryDirectory(prefix="peg_ctrl_bench_") as tmp:
+            jobs = [(task_config("default", name, s), Path(tmp) / f"e{s}") for s in range(episodes)]
+            t0 = time.perf_counter()
+            results = run_batch(jobs, workers=workers, desc=f"sweep / {name}")
+            wall = time.perf_counter() - t0
+        rows.append(
+            {
+                "profile": name,
+                "task": "default",
+                "episodes": episodes,
+                "workers": workers,
+                "successes": sum(r["status"] == "success" for r in results),
+                "wall_s": wall,
+                "episodes_per_hour": 3600.0 * episodes / wall,
+            }
+        )
+    return rows
 
 
 # Held pushes (peg_ctrl.validity) after whose end each profile is timed. Named by the push, not
@@ -269,33 +280,35 @@ def run_benchmarks(
     out: Path,
     *,
     controllers: list[str],
-    n_steps: int,
+    tasks: list[str],
     repeats: int,
+    profile: str = "seed",
     control_dts: list[float | None] | None = None,
-    episode: bool = True,
+    throughput: bool = True,
+    throughput_episodes: int = 20,
+    physics: bool = False,
 ) -> dict[str, Any]:
-    """Run the benchmarks (each controller at each control period) and write JSON to ``out``."""
-    entries = []
-    for c in controllers:
-        for dt in control_dts or [None]:
-            entries.append(bench_controller(c, n_steps=n_steps, repeats=repeats, control_dt=dt))
-    episodes = (
-        [bench_episode(controller=c, repeats=max(1, repeats // 2)) for c in controllers] if episode else []
-    )
-    physics = bench_profiles(repeats=repeats) if episode else None
+    """Run the benchmarks and write JSON to ``out``."""
+    from peg_ctrl.io import atomic_write_text
+
+    entries = [
+        bench_episode(c, task=t, profile=profile, repeats=repeats, control_dt=dt)
+        for t in tasks
+        for c in controllers
+        for dt in control_dts or [None]
+    ]
     results = {
         "machine": {
             "python": platform.python_version(),
             "mujoco": mujoco.__version__,
             "cpu": platform.machine(),
         },
-        "method": "closed loop vs replay of its own control sequence with bare mj_step; "
-        "alternating repetitions, medians of CPU time",
-        "target": "overhead_ratio <= 0.05",
-        "controllers": entries,
-        "episodes": episodes,
-        "physics_profiles": physics,
+        "method": __doc__,
+        "clock": "CPU time of the process for loop and replay; wall time for sweep throughput",
+        "target": f"overhead median <= {TARGET_OVERHEAD:.2f}",
+        "episodes": entries,
+        "throughput": bench_throughput(episodes=throughput_episodes) if throughput else [],
+        "physics_profiles": bench_profiles(repeats=repeats) if physics else None,
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n")
+    atomic_write_text(out, json.dumps(results, indent=2) + "\n")
     return results

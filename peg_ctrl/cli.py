@@ -125,21 +125,35 @@ def _print_profiles(result: dict[str, Any]) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from peg_ctrl.bench import run_benchmarks
+    from peg_ctrl.bench import BENCH_TASKS, run_benchmarks
     from peg_ctrl.controllers import REGISTRY
+    from peg_ctrl.physics import profile
 
     names = args.controller or sorted(REGISTRY)
     for name in names:
         _check_controller(name)
-    if args.steps < 100 or args.repeats < 1:
-        raise ConfigError(f"--steps must be >= 100 and --repeats >= 1, got {args.steps}, {args.repeats}")
+    tasks = args.task or list(BENCH_TASKS)
+    for task in tasks:
+        if task not in BENCH_TASKS:
+            raise ConfigError(f"--task must be one of {', '.join(BENCH_TASKS)}, got {task!r}")
+    profile(args.profile, where="--profile")
+    if args.repeats < 1:
+        raise ConfigError(f"--repeats must be >= 1, got {args.repeats}")
+    if args.throughput_episodes < 0:
+        raise ConfigError(f"--throughput-episodes must be >= 0, got {args.throughput_episodes}")
     for dt in args.control_dt or []:
         if not dt > 0:
             raise ConfigError(f"--control-dt must be > 0 s, got {dt}")
-    if args.sweep and args.sweep_episodes < 1:
+    if args.sweep_episodes < 1:
         raise ConfigError(f"--sweep-episodes must be >= 1, got {args.sweep_episodes}")
     if args.physics and args.sweep:
         raise ConfigError("--physics and --sweep are separate benchmarks; give one")
+    if args.control_dt:  # reject a period the physics step does not divide before any work
+        from peg_ctrl.physics import PROFILES
+        from peg_ctrl.timing import control_decimation
+
+        for dt in args.control_dt:
+            control_decimation(dt, PROFILES[args.profile].timestep)
     out = prepare_output_file(args.out)
     if args.physics:
         import json
@@ -166,25 +180,31 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     results = run_benchmarks(
         out,
         controllers=names,
-        n_steps=args.steps,
+        tasks=tasks,
         repeats=args.repeats,
+        profile=args.profile,
         control_dts=args.control_dt or None,
+        throughput=args.throughput_episodes > 0,
+        throughput_episodes=args.throughput_episodes,
     )
-    for r in results["controllers"]:
+    print(f"clock: {results['clock']}; {args.repeats} interleaved repeats, median (min)")
+    for r in results["episodes"]:
+        c = r["components_us_per_step"]
+        k = r["physics_steps_per_control_step"]
+        raw, lp, ov = r["raw_us_per_step"], r["loop_us_per_step"], r["overhead"]
         print(
-            f"{r['controller']:>10} @ {1e6 / r['control_period_us']:5.0f} Hz: "
-            f"physics {r['raw_step_us_median']:.1f} us/step, with controller "
-            f"{r['loop_step_us_median']:.1f} us/step, overhead {100 * r['overhead_ratio']:+.1f} %, "
-            f"solve median {r['solver_call_us_median']:.1f} us (p99 {r['solver_call_us_p99']:.1f} us, "
-            f"period {r['solver_period_us']:.0f} us)"
+            f"{r['controller']:>10} @ {r['control_hz']:4.0f} Hz, {r['task']}/{r['profile']} ({r['status']}, "
+            f"{r['physics_steps']} steps): raw {raw['median']:6.1f} ({raw['min']:6.1f}) us/step, "
+            f"loop {lp['median']:6.1f} ({lp['min']:6.1f}), overhead {100 * ov['median']:+5.1f} % "
+            f"({100 * ov['min']:+5.1f} %){'' if r['within_target'] else '  > 10 %'}\n"
+            f"{'':>12}per control step: task {c['task'] * k:5.1f}, controller {c['controller'] * k:5.1f}, "
+            f"monitors {c['monitors'] * k:5.1f}, recording {c['recording'] * k:5.1f} us "
+            f"(physics {c['physics'] * k:6.1f} us for {k} steps)"
         )
-    if results.get("physics_profiles"):
-        _print_profiles(results["physics_profiles"])
-    for e in results["episodes"]:
+    for t in results["throughput"]:
         print(
-            f"{e['controller']:>10} episode: physics {e['raw_step_us_median']:.1f} us/step, loop "
-            f"{e['episode_step_us_median']:.1f} us/step, overhead {100 * e['overhead_ratio']:+.1f} % "
-            f"(logging {100 * e['logging_share_of_overhead']:.0f} % of it)"
+            f"sweep, {t['task']} task, {t['profile']:>9}: {t['episodes']} episodes on {t['workers']} workers "
+            f"in {t['wall_s']:.1f} s wall = {t['episodes_per_hour']:,.0f} episodes/hour"
         )
     print(f"wrote {out}")
     return 0
@@ -361,6 +381,27 @@ def _cmd_validity(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_validate_profile(args: argparse.Namespace) -> int:
+    from peg_ctrl.physics import profile
+    from peg_ctrl.profile_check import validate_profile
+
+    profile(args.profile, where="profile")
+    profile(args.reference, where="--reference")
+    if args.profile == args.reference:
+        raise ConfigError(f"--reference must differ from the profile, got {args.reference!r} for both")
+    if args.seeds < 2:
+        raise ConfigError(f"--seeds must be >= 2, got {args.seeds}")
+    if args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    out = prepare_output_dir(args.out or f"runs/validate-{args.profile}")
+    result = validate_profile(
+        args.profile, out, reference=args.reference, seeds=args.seeds, workers=args.workers
+    )
+    print((out / "validation.md").read_text(), end="")
+    print(f"wrote {out / 'validation.json'} and {out / 'validation.md'}")
+    return 0 if result["passed"] else 1
+
+
 def _cmd_plot(args: argparse.Namespace) -> int:
     from peg_ctrl.experiments.report import write_report
 
@@ -396,18 +437,28 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=103, help="bytes swept over 0..255 (default 103)")
     p.set_defaults(func=_cmd_calibrate)
 
-    p = sub.add_parser("bench", help="controller overhead over raw physics, written to JSON")
+    p = sub.add_parser(
+        "bench",
+        help="loop overhead over raw physics per controller, by component, and sweep throughput (JSON)",
+    )
     p.add_argument(
         "--out", default="bench.json", help="output JSON file (default: bench.json in the current directory)"
     )
     p.add_argument("--controller", action="append", help="controller to bench (repeatable; default all)")
-    p.add_argument("--steps", type=int, default=3000, help="physics steps per repetition")
-    p.add_argument("--repeats", type=int, default=7, help="alternating repetitions (median taken)")
+    p.add_argument("--task", action="append", help="task: default or contact (repeatable; default both)")
+    p.add_argument("--profile", default="seed", help="physics profile of the episodes (default seed)")
+    p.add_argument("--repeats", type=int, default=3, help="interleaved repetitions (default 3)")
     p.add_argument(
         "--control-dt",
         type=float,
         action="append",
         help="control period in s to bench (repeatable; default: each controller's own)",
+    )
+    p.add_argument(
+        "--throughput-episodes",
+        type=int,
+        default=20,
+        help="episodes per profile in the 2-worker sweep throughput (default 20; 0: skip)",
     )
     p.add_argument("--sweep", action="store_true", help="instead: sweep speedup of 2 workers over 1")
     p.add_argument(
@@ -488,6 +539,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the start-error draws (default 0)")
     p.add_argument("--out", default="runs/validity", help="output directory (default runs/validity)")
     p.set_defaults(func=_cmd_validity)
+
+    p = sub.add_parser(
+        "validate-profile",
+        help="a physics profile against a reference on both tasks: success, peak force, slip, speed "
+        "(exit 1 if a check fails)",
+    )
+    p.add_argument("profile", help="the profile to validate (e.g. fast)")
+    p.add_argument("--reference", default="seed", help="the reference profile (default seed)")
+    p.add_argument("--seeds", type=int, default=100, help="seeds per task and profile (default 100)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--out", help="output directory (default runs/validate-<profile>)")
+    p.set_defaults(func=_cmd_validate_profile)
 
     p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")
     p.add_argument("dir", help="a sweep's output directory")

@@ -294,8 +294,9 @@ def run_episode(
     loop = build_loop(cfg)
     steps_log = StepLogRecorder(logger, cfg.log.interval)
     recorders: list[Recorder] = [steps_log]
-    if cfg.log.trace:
-        recorders.insert(0, TraceRecorder(logger, loop.task.phases))
+    trace = TraceRecorder(logger, loop.task.phases) if cfg.log.trace else None
+    if trace is not None:
+        recorders.insert(0, trace)
     camera = VideoRecorder(loop.model, out_dir / "episode.mp4") if video else None
     if camera is not None:
         recorders.append(camera)
@@ -307,6 +308,8 @@ def run_episode(
     outcome = loop.run(cfg.step_limit(loop.model.opt.timestep))
     wall = time.perf_counter() - wall0
     steps_log.flush(loop)
+    if trace is not None:
+        trace.flush()
     result = _result(cfg, loop, outcome, wall, logger)
     logger.close({"event": "end", **result.to_dict()})
     if camera is not None:

@@ -7,17 +7,19 @@ crash or Ctrl-C leaves readable files up to the last flush:
 - ``log.jsonl`` — one JSON object per line: ``{"event": "step", ...}`` every ``interval`` steps
   with the SPEC §7 fields, ``{"event": "phase", ...}`` when a phase ends, ``{"event": "end", ...}``
   with the episode record;
-- ``forces.csv`` — the full-rate force trace: time, phase and the net contact force of every
-  body-group pair at each control step (converted to ``forces.npz`` when the episode ends).
+- ``forces.npz`` — the full-rate force trace (:data:`TRACE_COLUMNS`): time, phase, the net
+  contact force of every body-group pair, the peg's deepest penetration and its depth, at every
+  physics step. While the episode runs the rows are appended, in chunks, to ``forces.partial``
+  (raw little-endian float64, :data:`TRACE_COLUMNS` per row), which :func:`read_trace` reads
+  too; it is replaced by ``forces.npz`` when the episode ends.
 """
 
 from __future__ import annotations
 
-import csv
 import json
+import os
 import queue
 import threading
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -50,21 +52,19 @@ _STOP = object()
 
 
 class EpisodeLogger:
-    """Queue-fed writer of ``log.jsonl`` and ``forces.csv`` in ``out_dir``."""
+    """Queue-fed writer of ``log.jsonl`` and the force trace in ``out_dir``."""
 
-    def __init__(self, out_dir: Path, *, trace_chunk: int = 250) -> None:
+    def __init__(self, out_dir: Path) -> None:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.out_dir / "log.jsonl"
-        self.trace_path = self.out_dir / "forces.csv"
+        self.trace_path = self.out_dir / "forces.partial"
         self.npz_path = self.out_dir / "forces.npz"
         self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._trace_rows: list[Sequence[float]] = []
-        self._trace_chunk = trace_chunk
+        self._trace_chunks: list[np.ndarray] = []
         self._error: BaseException | None = None
         self._log_file = open(self.log_path, "w", encoding="utf-8")  # noqa: SIM115 (closed by the writer)
-        self._trace_file = open(self.trace_path, "w", newline="", encoding="utf-8")  # noqa: SIM115
-        csv.writer(self._trace_file).writerow(TRACE_COLUMNS)
+        self._trace_file = open(self.trace_path, "wb")  # noqa: SIM115
         self._thread = threading.Thread(target=self._run, name="episode-log-writer", daemon=True)
         self._thread.start()
         self._closed = False
@@ -74,33 +74,31 @@ class EpisodeLogger:
         """Queue one JSON record (serialised on the writer thread)."""
         self._queue.put(("json", entry))
 
-    def trace(self, row: Sequence[float]) -> None:
-        """Append one row of :data:`TRACE_COLUMNS` (buffered, handed over in chunks)."""
-        self._trace_rows.append(row)
-        if len(self._trace_rows) >= self._trace_chunk:
-            self._queue.put(("trace", self._trace_rows))
-            self._trace_rows = []
+    def trace(self, rows: np.ndarray) -> None:
+        """Append rows (n, len(TRACE_COLUMNS)) to the force trace; the logger keeps ``rows``."""
+        self._trace_chunks.append(rows)
+        self._queue.put(("trace", rows))
 
     def close(self, end_record: dict[str, Any] | None = None) -> None:
         """Flush everything, write the end record and ``forces.npz``, stop the writer."""
         if self._closed:
             return
         self._closed = True
-        if self._trace_rows:
-            self._queue.put(("trace", self._trace_rows))
-            self._trace_rows = []
         if end_record is not None:
             self._queue.put(("json", end_record))
         self._queue.put(_STOP)
         self._thread.join()
         if self._error is not None:
             raise RuntimeError(f"log writer failed: {self._error}") from self._error
-        trace = read_trace(self.trace_path)
-        np.savez_compressed(self.npz_path, columns=np.array(TRACE_COLUMNS), data=trace)
+        chunks = self._trace_chunks or [np.zeros((0, len(TRACE_COLUMNS)))]
+        trace = np.concatenate(chunks)
+        tmp = self.npz_path.with_name(self.npz_path.name + ".tmp.npz")
+        np.savez_compressed(tmp, columns=np.array(TRACE_COLUMNS), data=trace)
+        os.replace(tmp, self.npz_path)
+        self.trace_path.unlink(missing_ok=True)
 
     # -- consumer side (writer thread) ------------------------------------------------------
     def _run(self) -> None:
-        writer = csv.writer(self._trace_file)
         try:
             while True:
                 item = self._queue.get()
@@ -112,7 +110,7 @@ class EpisodeLogger:
                     if kind == "json":
                         self._log_file.write(json.dumps(payload, separators=(",", ":")) + "\n")
                     else:
-                        writer.writerows(payload)
+                        self._trace_file.write(np.ascontiguousarray(payload, dtype="<f8").tobytes())
                     try:
                         item = self._queue.get_nowait()
                     except queue.Empty:
@@ -141,18 +139,15 @@ def read_log(path: Path) -> list[dict[str, Any]]:
 
 
 def read_trace(path: Path) -> np.ndarray:
-    """The force trace as an array (n, len(TRACE_COLUMNS)); a torn last row is skipped."""
-    rows = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None:
-            return np.zeros((0, len(TRACE_COLUMNS)))
-        for row in reader:
-            if len(row) != len(TRACE_COLUMNS):
-                break
-            try:
-                rows.append([float(v) for v in row])
-            except ValueError:
-                break
-    return np.asarray(rows, dtype=float).reshape(-1, len(TRACE_COLUMNS))
+    """The force trace (n, len(TRACE_COLUMNS)) of ``forces.npz``, or of an episode's
+    ``forces.partial`` if it did not finish (a torn last row, from a kill, is skipped). ``path``
+    is either file or the episode directory."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "forces.npz" if (path / "forces.npz").exists() else path / "forces.partial"
+    if path.suffix == ".npz":
+        with np.load(path) as npz:
+            return np.asarray(npz["data"], dtype=float)
+    raw = np.fromfile(path, dtype="<f8")
+    n = len(raw) // len(TRACE_COLUMNS)
+    return raw[: n * len(TRACE_COLUMNS)].reshape(n, len(TRACE_COLUMNS)).astype(float)

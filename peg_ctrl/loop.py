@@ -3,35 +3,41 @@
 Every control period::
 
     observe (gripper state, with sensor noise) → task.target → controller.compute → data.ctrl
-    → ``decimation`` physics steps in C (mj_step nstep) → observe the peg and contacts
-    → monitors (divergence, contact force spike, grasp slip) → task.evaluate → recorders
+    → ``decimation`` physics steps, each followed by one copy of ``data.sensordata`` (in C)
+    → contact forces and penetrations of every physics step at once (numpy, preallocated)
+    → observe the peg → monitors (divergence, contact force spike, grasp slip) → task.evaluate
+    → recorders
 
-Autonomous episodes, teleoperation and the benchmark are thin drivers of :class:`Loop`; no
-other code steps the physics in a loop (jaw calibration and the benchmark's raw-physics replay
-aside). The control period must be a whole multiple of the physics timestep.
+Per physics step the loop does only what must happen per step: step the physics and keep its
+contact sensors, so peak forces, the contact impulse, the force-spike check and the force trace
+are at the full physics rate. Everything the control law, the task and the monitors need runs
+once per control period. Autonomous episodes, teleoperation and the benchmark are thin drivers
+of :class:`Loop`; no other code steps the physics in a loop (jaw calibration and the
+benchmark's raw-physics replay aside). The control period must be a whole multiple of the
+physics timestep.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Sequence
 from typing import NamedTuple, Protocol
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
 from peg_ctrl.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
 from peg_ctrl.scene import HOME_KEY, SceneConfig
-from peg_ctrl.state import BLOCK_PEG, ControlState, PegObservation, StateReader
+from peg_ctrl.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
 from peg_ctrl.tasks.base import Evaluation, Observation, Task
 from peg_ctrl.timing import control_decimation
 
-__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "DIVERGENCE_CHECK_EVERY"]
-
-DIVERGENCE_CHECK_EVERY = 10  # control steps between divergence checks (MuJoCo warns at once anyway)
+__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTimer"]
 
 
 class SensorNoise:
@@ -53,7 +59,11 @@ class SensorNoise:
 
 
 class StepInfo(NamedTuple):
-    """One control step, for recorders: ``step`` physics steps done, time ``t`` [s] after it."""
+    """One control step, for recorders: ``step`` physics steps done, time ``t`` [s] after it.
+
+    ``forces`` and ``penetrations`` are the largest of the control period's physics steps; the
+    sensors of every physics step are in ``sensors`` (valid during ``record`` only).
+    """
 
     step: int
     t: float
@@ -62,8 +72,36 @@ class StepInfo(NamedTuple):
     target: GripperTarget
     output: ControlOutput
     peg: PegObservation  # after the step
-    forces: list[float]  # net contact force per pair of state.PAIRS [N]
-    penetrations: list[float]  # per state.PEG_PARTNERS [m]
+    forces: list[float]  # peak net contact force per pair of state.PAIRS [N]
+    penetrations: list[float]  # peak per state.PEG_PARTNERS [m]
+    sensors: SensorBlock  # the period's physics steps, one row each
+    peg_qpos: NDArray[np.float64]  # (decimation, 7) the peg's pose after each physics step
+
+
+class LoopTimer:
+    """Optional per-section CPU timing of :meth:`Loop.step` (for ``peg-sim bench``): seconds
+    summed over steps in ``task`` (target and evaluate), ``controller``, ``physics`` (the
+    physics steps and their sensor copies), ``monitors`` (sensor reduction, observation and
+    checks) and ``recording`` (the recorders)."""
+
+    SECTIONS = ("task", "controller", "physics", "monitors", "recording")
+
+    def __init__(self) -> None:
+        self.seconds = dict.fromkeys(self.SECTIONS, 0.0)
+        self.steps = 0  # control steps timed
+
+    def add(self, task: float, controller: float, physics: float, monitors: float, recording: float) -> None:
+        sec = self.seconds
+        sec["task"] += task
+        sec["controller"] += controller
+        sec["physics"] += physics
+        sec["monitors"] += monitors
+        sec["recording"] += recording
+        self.steps += 1
+
+
+def _no_clock() -> float:
+    return 0.0
 
 
 class Recorder(Protocol):
@@ -100,7 +138,12 @@ class Loop:
         self.data = mujoco.MjData(self.model)
         self.reader = StateReader(self.model, contact_threshold_n=self.contact_threshold_n)
         self.decimation = control_decimation(self.controller.control_dt, self.model.opt.timestep)
-        self.divergence = DivergenceMonitor(DIVERGENCE_CHECK_EVERY * self.decimation)
+        self.divergence = DivergenceMonitor()
+        self.sensors = self.reader.sensor_block(self.decimation)
+        self.peg_qpos = np.zeros((self.decimation, 7))
+        self._block_force = np.zeros(self.decimation)  # peg-block force of each physics step [N]
+        self._peg_q = self.data.qpos[self.reader.peg_qpos_slice]  # a view into data
+        self.timer: LoopTimer | None = None
         self._half_length = 0.5 * self.scene.assets.peg_length
         self._home = self.model.key(HOME_KEY).id
         self.steps = 0  # physics steps since reset
@@ -135,46 +178,98 @@ class Loop:
         if self.grasp is not None:
             self.grasp.reset()
         self.divergence.reset(data)
+        self.sensors.raw[:] = 0.0
         self.steps = 0
         self.last = None
         return obs
 
     def step(self) -> Evaluation:
         """One control period; raises :class:`EpisodeFailure` if a monitor or the task fails."""
+        timer = self.timer
+        clock = time.thread_time if timer is not None else _no_clock
         data = self.data
         assert self.peg is not None, "reset() first"
+        t0 = clock()
         state = self.reader.control_state(data)
         if self.noise is not None:
             state = self.noise.apply(state)
         target = self.task.target(Observation(float(data.time), state, self.peg))
-        try:
-            out = self.controller.compute(state, target)
-        except DivergenceError as exc:
-            raise EpisodeFailure("diverged", f"controller rejected the state: {exc}") from None
-        data.ctrl[:] = out.ctrl
-        self.output = out
-        mujoco.mj_step(self.model, data, nstep=self.decimation)
-        self.steps += self.decimation
-        forces, pens = self.reader.pair_forces(data)
-        peg = self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
-        t = float(data.time)
-        self.history.update(t, self.control_dt, forces[BLOCK_PEG], peg)
-        failure: EpisodeFailure | None = None
-        try:
-            self.divergence.check(data, self.steps)
-            self.contact.check(forces, pens)
-            if self.grasp is not None and self.task.grasped:
-                self.grasp.check(data, state, peg)
-            self.last = self.task.evaluate(Observation(t, state, peg))
-        except EpisodeFailure as exc:
-            failure = exc
-        info = StepInfo(self.steps, t, self.task.phase, state, target, out, peg, forces, pens)
+        t1 = clock()
+        out = self._compute(state, target)
+        t2 = clock()
+        self._physics(out)
+        t3 = clock()
+        forces, pens, failure = self._monitor(state)
+        t4 = clock()
+        if failure is None:
+            failure = self._evaluate(state)
+        t5 = clock()
+        info = StepInfo(
+            self.steps,
+            float(data.time),
+            self.task.phase,
+            state,
+            target,
+            out,
+            self.peg,  # type: ignore[arg-type]
+            forces,
+            pens,
+            self.sensors,
+            self.peg_qpos,
+        )
         for recorder in self.recorders:
             recorder.record(self, info)
+        if timer is not None:
+            timer.add(t1 - t0 + t5 - t4, t2 - t1, t3 - t2, t4 - t3, clock() - t5)
         if failure is not None:
             raise failure
         assert self.last is not None
         return self.last
+
+    def _compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        try:
+            out = self.controller.compute(state, target)
+        except DivergenceError as exc:
+            raise EpisodeFailure("diverged", f"controller rejected the state: {exc}") from None
+        self.output = out
+        return out
+
+    def _physics(self, out: ControlOutput) -> None:
+        """Apply ``out`` and run the control period's physics steps, keeping their sensors."""
+        model, data = self.model, self.data
+        data.ctrl[:] = out.ctrl
+        raw, sd, peg_log, peg_q = self.sensors.raw, data.sensordata, self.peg_qpos, self._peg_q
+        step = mujoco.mj_step
+        for i in range(self.decimation):
+            step(model, data)
+            raw[i] = sd
+            peg_log[i] = peg_q
+        self.steps += self.decimation
+
+    def _monitor(self, state: ControlState) -> tuple[list[float], list[float], EpisodeFailure | None]:
+        """Reduce the period's sensors, observe the peg and run the monitors."""
+        data, sensors = self.data, self.sensors
+        forces, pens = sensors.reduce()
+        block = sensors.force_sq[:, BLOCK_PEG]
+        np.sqrt(block, out=self._block_force)
+        peg = self.peg = self.reader.peg(data, float(self._block_force[-1]), self._half_length)
+        try:
+            self.divergence.check(data)
+            self.history.update(float(data.time), self.model.opt.timestep, self._block_force, peg)
+            self.contact.check(forces, pens)
+            if self.grasp is not None and self.task.grasped:
+                self.grasp.check(data, state, peg)
+        except EpisodeFailure as exc:
+            return forces, pens, exc
+        return forces, pens, None
+
+    def _evaluate(self, state: ControlState) -> EpisodeFailure | None:
+        assert self.peg is not None
+        try:
+            self.last = self.task.evaluate(Observation(float(self.data.time), state, self.peg))
+        except EpisodeFailure as exc:
+            return exc
+        return None
 
     def advance(self, seconds: float) -> Evaluation | None:
         """Step for ``seconds`` [s] of simulated time (whole control periods, at least one), or

@@ -20,6 +20,7 @@ from typing import NamedTuple, Protocol
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.scene import GRIPPER_PREFIX, SceneConfig
@@ -185,40 +186,59 @@ class GraspMonitor:
 
     def reset(self) -> None:
         self.slip = 0.0
-        self._rel_ref: np.ndarray | None = None
-        self._axis_ref: np.ndarray | None = None
+        self._rel_ref: tuple[float, float, float] | None = None
+        self._axis_ref: tuple[float, float, float] | None = None
 
     def check(self, data: mujoco.MjData, gripper: ControlState, peg: PegObservation) -> None:
-        r_pad = data.xmat[self._pad].reshape(3, 3)
-        rel = r_pad.T @ (data.xpos[self._peg] - data.xpos[self._pad])
-        axis_pad = r_pad.T @ peg.axis_world
+        # Plain floats: this runs every control step while the peg is held.
+        r = data.xmat[self._pad].tolist()  # row-major 3x3
+        px, py, pz = data.xpos[self._pad].tolist()
+        gx, gy, gz = data.xpos[self._peg].tolist()
+        dx, dy, dz = gx - px, gy - py, gz - pz
+        ax, ay, az = peg.axis_world.tolist()
+        # R^T d and R^T axis: the peg's offset and axis in the pad frame
+        rel = (
+            r[0] * dx + r[3] * dy + r[6] * dz,
+            r[1] * dx + r[4] * dy + r[7] * dz,
+            r[2] * dx + r[5] * dy + r[8] * dz,
+        )
+        axis = (
+            r[0] * ax + r[3] * ay + r[6] * az,
+            r[1] * ax + r[4] * ay + r[7] * az,
+            r[2] * ax + r[5] * ay + r[8] * az,
+        )
         if self._rel_ref is None or self._axis_ref is None:
-            self._rel_ref, self._axis_ref = rel, axis_pad
-        moved = float(np.linalg.norm(rel - self._rel_ref))
+            self._rel_ref, self._axis_ref = rel, axis
+        rx, ry, rz = self._rel_ref
+        moved = math.sqrt((rel[0] - rx) ** 2 + (rel[1] - ry) ** 2 + (rel[2] - rz) ** 2)
         self.slip = max(self.slip, moved)
         if moved > self.lost_distance:
             raise EpisodeFailure("grasp_lost", f"peg moved {moved * 1e3:.1f} mm in the pads while held")
-        in_hand = math.acos(min(1.0, abs(float(axis_pad @ self._axis_ref))))
+        bx, by, bz = self._axis_ref
+        in_hand = math.acos(min(1.0, abs(axis[0] * bx + axis[1] * by + axis[2] * bz)))
         if in_hand > self.max_in_hand_tilt:
             raise EpisodeFailure("excessive_tilt", f"peg turned {in_hand:.2f} rad in the pads")
 
 
 class DivergenceMonitor:
-    """Fails on a new MuJoCo warning or a non-finite state; checked every ``every`` physics steps."""
+    """Fails on a new MuJoCo warning or a non-finite state. Checked every control period:
+    MuJoCo's warning counters keep a blow-up (bad qpos, qvel or qacc) of any physics step in
+    between; the sum of the state, which catches a NaN anywhere else, every ``state_every``-th."""
 
-    def __init__(self, every: int) -> None:
-        self.every = every
+    def __init__(self, state_every: int = 10) -> None:
+        self.state_every = state_every
         self._warnings0 = 0
+        self._count = 0
 
     def reset(self, data: mujoco.MjData) -> None:
         self._warnings0 = int(data.warning.number.sum())
+        self._count = 0
 
-    def check(self, data: mujoco.MjData, step: int) -> None:
-        if step % self.every:
-            return
-        # MuJoCo's own warnings catch a blow-up at once; the sum catches a NaN anywhere.
-        if int(data.warning.number.sum()) != self._warnings0 or not math.isfinite(
-            float(data.qpos.sum() + data.qvel.sum())
+    def check(self, data: mujoco.MjData) -> None:
+        self._count += 1
+        if int(data.warning.number.sum()) != self._warnings0 or (
+            self._count % self.state_every == 0
+            and not math.isfinite(float(data.qpos.sum() + data.qvel.sum()))
         ):
             raise EpisodeFailure("diverged", "non-finite state or MuJoCo warning")
 
@@ -246,7 +266,7 @@ TRAVEL_STEP = 1e-4  # lateral travel is counted in moves of at least this [m]: c
 
 class ContactHistory:
     """From the first peg-block contact on: its time [s], the contact impulse ``∫|F| dt`` [N s]
-    (sampled at the control rate), the largest peg tilt [rad] and the lateral travel of the
+    (at the physics rate), the largest peg tilt [rad] and the lateral travel of the
     peg's lower end [m] (the search distance, counted in moves of :data:`TRAVEL_STEP` or more)."""
 
     def __init__(self, threshold: float = FIRST_CONTACT_N) -> None:
@@ -260,14 +280,19 @@ class ContactHistory:
         self.travel = 0.0
         self._xy = (0.0, 0.0)
 
-    def update(self, t: float, dt: float, force_block: float, peg: PegObservation) -> None:
+    def update(self, t: float, dt: float, force_block: NDArray[np.float64], peg: PegObservation) -> None:
+        """``force_block`` [N]: the peg-block force of each physics step (``dt`` [s] apart) of the
+        control period that ended at ``t`` [s]; ``peg`` as observed at ``t``."""
         x, y = float(peg.bottom_world[0]), float(peg.bottom_world[1])
         if self.first_contact is None:
-            if force_block <= self.threshold:
+            if float(force_block.max()) <= self.threshold:
                 return
-            self.first_contact = t
+            touching = np.flatnonzero(force_block > self.threshold)
+            self.first_contact = t - (len(force_block) - 1 - int(touching[0])) * dt
+            self.impulse += float(force_block[touching[0] :].sum()) * dt
             self._xy = (x, y)
-        self.impulse += force_block * dt
+        else:
+            self.impulse += float(force_block.sum()) * dt
         self.max_tilt = max(self.max_tilt, math.acos(min(1.0, abs(float(peg.axis_world[2])))))
         moved = math.hypot(x - self._xy[0], y - self._xy[1])
         if moved >= TRAVEL_STEP:

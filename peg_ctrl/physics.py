@@ -26,9 +26,18 @@
       ``implicitfast`` integrator; ``impratio`` 100 keeps the grasp without noslip, whose cost
       grows with the square of the contact count.
 
+``fast``
+    The ``seed`` contact model (geometry, margins, per-geom ``solref``/``solimp``, CG with 20
+    noslip iterations) integrated with ``implicitfast`` at a 2.5 ms step instead of RK4 at
+    1 ms: one forward pass per 2.5 ms of simulated time instead of four per millisecond.
+    MuJoCo's safety floor raises every contact time constant below two steps (the pads' 4 ms)
+    to 5 ms, so the grasp is softer. Validated against ``seed`` by ``peg-sim
+    validate-profile fast`` (docs/performance.md): what it may and may not be used for is
+    stated there.
+
 A profile changes the compiled model only: tasks, controllers and the loop do not know which
-one is in use (the control period must be a whole number of physics steps, which both meet at
-1 kHz).
+one is in use (the control period must be a whole number of physics steps: the default 200 Hz
+is 5, 10 and 2 of them in ``seed``, ``precision`` and ``fast``).
 """
 
 from __future__ import annotations
@@ -52,6 +61,7 @@ __all__ = [
     "PROFILES",
     "SEED",
     "PRECISION",
+    "FAST",
     "profile",
     "parts_for_roundness",
     "check_scene",
@@ -163,7 +173,9 @@ PRECISION = PhysicsProfile(
     ccd_iterations=100,
 )
 
-PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION)}
+FAST = dataclasses.replace(SEED, name="fast", timestep=0.0025, integrator="IMPLICITFAST")
+
+PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION, FAST)}
 
 
 def profile(name_or_profile: str | PhysicsProfile, *, where: str = "physics.profile") -> PhysicsProfile:

@@ -7,9 +7,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import mujoco
+import numpy as np
 
 from peg_ctrl.commands import quat_to_euler
-from peg_ctrl.episode_log import EpisodeLogger
+from peg_ctrl.episode_log import TRACE_COLUMNS, EpisodeLogger
+from peg_ctrl.state import PAIRS
 
 if TYPE_CHECKING:
     from peg_ctrl.loop import Loop, StepInfo
@@ -22,21 +24,61 @@ def _round(values: Any, digits: int = 6) -> list[float]:
 
 
 class TraceRecorder:
-    """The full-rate force trace: time, phase index, every pair's force, the peg's deepest
-    penetration and its depth below the hole mouth, each control step."""
+    """The full-rate force trace (:data:`~peg_ctrl.episode_log.TRACE_COLUMNS`): time, phase
+    index, every pair's force, the peg's deepest penetration and its depth below the hole mouth,
+    at every physics step. Each control step costs two array copies; the rows are built and
+    handed to the logger ``chunk`` physics steps at a time (and at :meth:`flush`)."""
 
-    def __init__(self, logger: EpisodeLogger, phases: tuple[str, ...]) -> None:
+    def __init__(self, logger: EpisodeLogger, phases: tuple[str, ...], *, chunk: int = 500) -> None:
         self.logger = logger
         self._index = {p: float(i) for i, p in enumerate(phases)}
+        self._chunk = chunk
         self._top: float | None = None
+        self._n = 0  # rows held
+        self._raw = np.zeros((0, 0))  # sensordata of each physics step
+        self._peg = np.zeros((0, 7))
+        self._t_end: list[float] = []  # per control step: its time and phase
+        self._phase: list[float] = []
 
     def record(self, loop: Loop, info: StepInfo) -> None:
+        k = loop.decimation
         if self._top is None:
             self._top = float(loop.scene.assets.block_size[2])
-        depth = self._top - float(info.peg.bottom_world[2])  # the peg's lower end below the mouth
-        self.logger.trace(
-            (info.t, self._index.get(info.phase, -1.0), *info.forces, max(info.penetrations), depth)
-        )
+            rows = self._chunk + k
+            self._raw = np.zeros((rows, loop.model.nsensordata))
+            self._sensors = info.sensors
+            self._peg = np.zeros((rows, 7))
+            self._dt = float(loop.model.opt.timestep)
+            self._half = 0.5 * float(loop.scene.assets.peg_length)
+            self._k = k
+        n = self._n
+        self._raw[n : n + k] = info.sensors.raw
+        self._peg[n : n + k] = info.peg_qpos
+        self._t_end.append(info.t)
+        self._phase.append(self._index.get(info.phase, -1.0))
+        self._n = n + k
+        if self._n >= self._chunk:
+            self.flush()
+
+    def flush(self) -> None:
+        """Hand the rows held to the logger."""
+        n = self._n
+        if not n:
+            return
+        assert self._top is not None
+        k = self._k
+        rows = np.empty((n, len(TRACE_COLUMNS)))
+        back = np.arange(k - 1, -1, -1, dtype=float) * self._dt  # row i of a step: t - (k-1-i) dt
+        rows[:, 0] = (np.asarray(self._t_end)[:, None] - back[None, :]).ravel()
+        rows[:, 1] = np.repeat(self._phase, k)
+        rows[:, 2 : 2 + len(PAIRS)] = self._sensors.forces(self._raw[:n])
+        rows[:, 2 + len(PAIRS)] = self._sensors.penetrations(self._raw[:n])
+        q = self._peg[:n]  # the lower end: centre - half length * |axis z| (axis z = 1 - 2(x^2+y^2))
+        axis_z = np.abs(1.0 - 2.0 * (q[:, 4] ** 2 + q[:, 5] ** 2))
+        rows[:, 3 + len(PAIRS)] = self._top - (q[:, 2] - self._half * axis_z)
+        self.logger.trace(rows)
+        self._n = 0
+        self._t_end, self._phase = [], []
 
 
 def step_record(loop: Loop, info: StepInfo) -> dict[str, Any]:

@@ -33,6 +33,7 @@ __all__ = [
     "PEG_PARTNERS",
     "BLOCK_PEG",
     "ft_world",
+    "SensorBlock",
 ]
 
 BODY_GROUPS = ("gripper", "peg", "block", "table")
@@ -164,6 +165,7 @@ class StateReader:
             raise ValueError("the ball joint must follow the slide joints in qpos/qvel")
         peg_joint = model.joint("peg_free")
         self._peg_q = int(peg_joint.qposadr[0])
+        self.peg_qpos_slice = slice(self._peg_q, self._peg_q + 7)  # the peg's pose in qpos
         self._peg_v = int(peg_joint.dofadr[0])
         self._pads = [model.geom(GRIPPER_PREFIX + n).id for n in ("left_pad1", "right_pad1")]
         # Box half-thickness along the closing direction (local y of the pad boxes).
@@ -290,6 +292,10 @@ class StateReader:
                 pens[k] = max(0.0, margin - sd[adr + 1])
         return mags, pens
 
+    def sensor_block(self, rows: int) -> SensorBlock:
+        """A :class:`SensorBlock` for ``rows`` physics steps of this model's contact sensors."""
+        return SensorBlock(self._force_sensors, self._dist_sensors, rows, self.model.nsensordata)
+
     def sim_state(self, data: mujoco.MjData) -> SimState:
         pq = data.qpos[self._peg_q : self._peg_q + 7].copy()
         pv = data.qvel[self._peg_v : self._peg_v + 6].copy()
@@ -301,3 +307,61 @@ class StateReader:
             omega_body_peg=pv[3:],
             contacts=self.contacts(data),
         )
+
+
+class SensorBlock:
+    """The contact sensors of the physics steps of one control period, read in bulk.
+
+    The loop copies ``data.sensordata`` into row ``i`` of :attr:`raw` after each of its physics
+    steps (one copy in C per step). :meth:`reduce` then computes, in a few numpy calls into
+    preallocated arrays, the squared net force per pair of :data:`PAIRS` of every row
+    (:attr:`force_sq`, (rows, len(PAIRS)) [N^2]: a matrix product of the squared sensor values),
+    and returns the peak force per pair and the peak penetration per peg partner over the rows,
+    as :meth:`StateReader.pair_forces` computes them for one step. :meth:`forces` and
+    :meth:`penetrations` give every row of any block of sensor rows (for the force trace, off
+    the hot path).
+    """
+
+    def __init__(
+        self,
+        force_sensors: list[tuple[int, int]],
+        dist_sensors: list[tuple[int, int, float]],
+        rows: int,
+        nsensordata: int,
+    ) -> None:
+        self.rows = rows
+        self.raw = np.zeros((rows, nsensordata))
+        self.force_sq = np.zeros((rows, len(PAIRS)))
+        self._sq = np.zeros((rows, nsensordata))
+        self._sum = np.zeros((nsensordata, len(PAIRS)))  # sums each pair's squared x, y, z
+        for k, adr in force_sensors:
+            self._sum[adr + 1 : adr + 4, k] = 1.0
+        self._peak_sq = np.zeros(len(PAIRS))
+        self._dist = [(k, adr, margin) for k, adr, margin in dist_sensors]
+
+    def reduce(self) -> tuple[list[float], list[float]]:
+        """Fill :attr:`force_sq`; the peak force per pair [N] and the peak penetration per peg
+        partner [m] over the rows."""
+        np.multiply(self.raw, self.raw, out=self._sq)
+        np.matmul(self._sq, self._sum, out=self.force_sq)
+        np.max(self.force_sq, axis=0, out=self._peak_sq)
+        forces = [math.sqrt(f) for f in self._peak_sq.tolist()]
+        pens = [0.0] * len(PEG_PARTNERS)
+        raw = self.raw
+        for k, adr, margin in self._dist:
+            found = raw[:, adr]
+            if found.any():  # the closest distance where a contact was found
+                pens[k] = max(0.0, margin - float(raw[:, adr + 1][found > 0.0].min()))
+        return forces, pens
+
+    def forces(self, raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Net force per pair (n, len(PAIRS)) [N] of sensor rows ``raw`` (n, nsensordata)."""
+        return np.sqrt((raw * raw) @ self._sum)
+
+    def penetrations(self, raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Deepest penetration over the peg partners (n,) [m] of sensor rows ``raw``."""
+        out = np.zeros(len(raw))
+        for _, adr, margin in self._dist:
+            pen = np.where(raw[:, adr] > 0.0, margin - raw[:, adr + 1], 0.0)
+            np.maximum(out, pen, out=out)
+        return out

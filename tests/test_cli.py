@@ -20,7 +20,7 @@ from peg_ctrl.teleop_window import WindowUnavailable
 
 from .conftest import assert_one_line_error, peg_sim
 
-SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep", "validity", "plot"]
+SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep", "validity", "validate-profile", "plot"]
 
 
 @pytest.mark.parametrize("command", SUBCOMMANDS)
@@ -39,22 +39,24 @@ def test_model_export(tmp_path: Path) -> None:
 
 def test_bench_writes_json(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
-    assert main(["bench", "--controller", "pd", "--out", str(out), "--steps", "200", "--repeats", "1"]) == 0
+    argv = ["bench", "--controller", "pd", "--task", "default", "--repeats", "1", "--throughput-episodes", "0"]
+    assert main([*argv, "--out", str(out)]) == 0
     result = json.loads(out.read_text())
-    (entry,) = result["controllers"]
-    assert entry["controller"] == "pd"
-    assert entry["physics_steps"] == 200
-    for key in ("raw_step_us_median", "loop_step_us_median", "overhead_ratio", "solve_time_us_p99"):
-        assert isinstance(entry[key], float)
-    (episode,) = result["episodes"]
-    assert episode["status"] == "success"
-    for key in (
-        "raw_step_us_median",
-        "episode_step_us_median",
-        "overhead_ratio",
-        "logging_share_of_overhead",
-    ):
-        assert isinstance(episode[key], float)
+    (entry,) = result["episodes"]
+    assert (entry["controller"], entry["task"], entry["profile"], entry["status"]) == (
+        "pd",
+        "default",
+        "seed",
+        "success",
+    )
+    assert entry["control_hz"] == pytest.approx(200.0) and entry["physics_steps_per_control_step"] == 5
+    assert entry["physics_steps"] > 5000  # a whole episode: grasp, transport and insertion contacts
+    for key in ("raw_us_per_step", "loop_us_per_step"):
+        assert 0 < entry[key]["min"] <= entry[key]["median"]
+    assert entry["loop_us_per_step"]["median"] > entry["raw_us_per_step"]["min"]
+    assert set(entry["components_us_per_step"]) == {"task", "controller", "physics", "monitors", "recording"}
+    assert all(v > 0 for v in entry["components_us_per_step"].values())
+    assert "CPU time" in result["clock"] and result["throughput"] == []
 
 
 def test_run_writes_a_video(tmp_path: Path) -> None:
@@ -82,9 +84,14 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
             ["bench", "--controller", "nope"],
             "unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
         ),
-        (["bench", "--steps", "many"], "argument --steps: invalid int value: 'many'"),
-        (["bench", "--steps", "5"], "--steps must be >= 100"),
-        (["bench", "--control-dt", "0.0015", "--steps", "200"], "not a whole multiple"),
+        (["bench", "--repeats", "many"], "argument --repeats: invalid int value: 'many'"),
+        (["bench", "--repeats", "0"], "--repeats must be >= 1"),
+        (["bench", "--task", "nope"], "--task must be one of default, contact, got 'nope'"),
+        (["bench", "--profile", "nope"], "--profile: unknown physics profile 'nope'"),
+        (["bench", "--control-dt", "0.0015"], "not a whole multiple"),
+        (["validate-profile", "nope"], "profile: unknown physics profile 'nope'"),
+        (["validate-profile", "fast", "--reference", "fast"], "--reference must differ"),
+        (["validate-profile", "fast", "--seeds", "1"], "--seeds must be >= 2"),
         (["calibrate", "--samples", "2"], "--samples must be >= 4"),
         (["sweep"], "one of the arguments config --list is required"),
         (
@@ -194,7 +201,7 @@ def test_bench_writes_exactly_out(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
 
     def fake(out: Path, **kwargs):  # type: ignore[no-untyped-def]
         out.write_text("{}")
-        return {"controllers": [], "episodes": []}
+        return {"clock": "CPU", "episodes": [], "throughput": []}
 
     monkeypatch.setattr(peg_ctrl.bench, "run_benchmarks", fake)
     monkeypatch.chdir(tmp_path)

@@ -13,7 +13,7 @@ from peg_ctrl.errors import ConfigError, DivergenceError
 from peg_ctrl.loop import Loop, StepInfo
 from peg_ctrl.monitors import ContactMonitor
 from peg_ctrl.scene import SceneConfig
-from peg_ctrl.state import ControlState
+from peg_ctrl.state import BLOCK_PEG, PAIRS, ControlState
 from peg_ctrl.tasks.tracking import TrackingTask
 
 HOME = GripperTarget(p_world=np.array([-0.2, 0.0, 0.2]), quat_world=np.array([1.0, 0, 0, 0]), jaw_sep_m=0.085)
@@ -28,6 +28,7 @@ class Log:
 
 
 def make(model: mujoco.MjModel, task=None, **kw) -> Loop:  # type: ignore[no-untyped-def]
+    kw.setdefault("control_dt", 0.001)  # one physics step per control step
     return Loop(
         model=model,
         controller=make_controller("pd", model, **kw),
@@ -116,3 +117,40 @@ def test_reset_restores_the_same_state(model: mujoco.MjModel) -> None:
     loop.reset(np.random.default_rng(0))
     np.testing.assert_array_equal(q0, loop.data.qpos)
     assert loop.steps == 0 and loop.data.time == 0.0
+
+
+def test_monitors_and_trace_see_every_physics_step_between_control_steps(model: mujoco.MjModel) -> None:
+    """At 200 Hz (5 physics steps per control step) the peak forces, the contact impulse and the
+    sensor rows are those of every physics step: the same as single steps with the same controls."""
+    drop = model.key("home").qpos.copy()
+    loop = make(model, TrackingTask(HOME, qpos=drop), control_dt=0.005)
+    assert loop.decimation == 5
+    ctrls: list[np.ndarray] = []
+    rows: list[np.ndarray] = []
+
+    class Keep:
+        def record(self, loop: Loop, info: StepInfo) -> None:
+            ctrls.append(np.array(info.output.ctrl))
+            rows.append(info.sensors.raw.copy())
+
+    loop.recorders = [Keep()]
+    loop.reset(np.random.default_rng(0))
+    data = mujoco.MjData(model)
+    mujoco.mj_copyData(data, model, loop.data)
+    loop.run(max_steps=400)
+    peaks = [0.0] * len(PAIRS)
+    impulse = 0.0
+    reader = loop.reader
+    for ctrl in ctrls:
+        data.ctrl[:] = ctrl
+        for _ in range(5):
+            mujoco.mj_step(model, data)
+            forces, _ = reader.pair_forces(data)
+            peaks = [max(a, b) for a, b in zip(peaks, forces, strict=True)]
+            if loop.history.first_contact is not None and data.time >= loop.history.first_contact - 1e-9:
+                impulse += forces[BLOCK_PEG] * model.opt.timestep
+    np.testing.assert_array_equal(data.qpos, loop.data.qpos)
+    assert max(peaks) > 0.1  # the peg rests on the table (its weight, 0.18 N)
+    assert loop.contact.peak_any == pytest.approx(max(peaks), rel=1e-12)
+    assert loop.history.impulse == pytest.approx(impulse, rel=1e-9, abs=1e-12)
+    assert np.concatenate(rows).shape == (400, model.nsensordata)

@@ -91,11 +91,15 @@ def test_contact_monitor_keeps_peaks_and_fails_on_a_spike() -> None:
     ContactMonitor(force_spike=None).check(forces, [0.0, 0.0, 0.0])  # no limit: no failure
 
 
-def test_divergence_monitor_catches_a_nan_on_its_period(model: mujoco.MjModel) -> None:
+def test_divergence_monitor_catches_a_nan_and_a_warning(model: mujoco.MjModel) -> None:
     data = mujoco.MjData(model)
-    m = DivergenceMonitor(every=10)
+    m = DivergenceMonitor(state_every=1)
     m.reset(data)
+    m.check(data)  # a clean state passes
     data.qvel[0] = np.nan
-    m.check(data, 9)  # not a checking step
     with pytest.raises(EpisodeFailure, match="diverged"):
-        m.check(data, 10)
+        m.check(data)
+    data.qvel[0] = 0.0
+    data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number += 1  # as MuJoCo counts a blow-up
+    with pytest.raises(EpisodeFailure, match="diverged"):
+        m.check(data)

@@ -63,13 +63,14 @@ class TeleopSession:
         self.task = TeleopTask(
             self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=decimation
         )
+        self.trace = TraceRecorder(self.logger, self.task.phases)
         self.loop = Loop(
             model=self.model,
             controller=ctrl,
             task=self.task,
             scene=self.scene,
             contact=ContactMonitor(force_spike=None),
-            recorders=[TraceRecorder(self.logger, self.task.phases), self],
+            recorders=[self.trace, self],
         )
         self.data = self.loop.data
         self.attempt = 1
@@ -173,6 +174,7 @@ class TeleopSession:
             "log_path": str(self.logger.log_path),
             "trace_path": str(self.logger.npz_path),
         }
+        self.trace.flush()
         self.logger.close({"event": "end", **self.summary})
         atomic_write_text(self.out_dir / "summary.json", _json(self.summary))
         return self.summary

@@ -64,8 +64,9 @@ def test_ik_runs_every_ik_dt_and_holds_between(diffik: DiffIKController, home_st
     c.reset(home_state)
     tgt = target(HOME + [0.01, 0.0, 0.0])
     statuses = [c.compute(home_state, tgt).diagnostics for _ in range(20)]
-    assert [d.status for d in statuses] == (["ok"] + ["hold"] * 9) * 2
-    assert [d.iterations for d in statuses] == ([1] + [0] * 9) * 2
+    every = round(c.config.ik_dt / c.control_dt)  # 2 at the default 200 Hz and 100 Hz IK
+    assert [d.status for d in statuses] == (["ok"] + ["hold"] * (every - 1)) * (20 // every)
+    assert [d.iterations for d in statuses] == ([1] + [0] * (every - 1)) * (20 // every)
 
 
 def test_scaled_config_builds_a_working_controller(model: mujoco.MjModel, home_state: ControlState) -> None:

@@ -24,7 +24,7 @@ def test_scaled_scales_tuple_gains() -> None:
     assert ImpedanceConfig.GAINS == ("k_pos", "k_rot")
     assert scaled.k_pos == (1200.0 * 0.9,) * 3
     assert scaled.k_rot == (100.0 * 0.9, 110.0 * 0.9, 120.0 * 0.9)
-    assert (scaled.damping_ratio, scaled.v_max, scaled.control_dt) == (1.0, 0.5, 0.001)
+    assert (scaled.damping_ratio, scaled.v_max, scaled.control_dt) == (1.0, 0.5, 0.005)
     assert cfg.scaled(1.0) == cfg
 
 
