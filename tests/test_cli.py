@@ -20,7 +20,17 @@ from peg_ctrl.teleop_window import WindowUnavailable
 
 from .conftest import assert_one_line_error, peg_sim
 
-SUBCOMMANDS = ["model", "calibrate", "bench", "run", "teleop", "sweep", "validity", "validate-profile", "plot"]
+SUBCOMMANDS = [
+    "model",
+    "calibrate",
+    "bench",
+    "run",
+    "teleop",
+    "sweep",
+    "validity",
+    "validate-profile",
+    "plot",
+]
 
 
 @pytest.mark.parametrize("command", SUBCOMMANDS)
@@ -39,7 +49,8 @@ def test_model_export(tmp_path: Path) -> None:
 
 def test_bench_writes_json(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
-    argv = ["bench", "--controller", "pd", "--task", "default", "--repeats", "1", "--throughput-episodes", "0"]
+    argv = ["bench", "--controller", "pd", "--task", "default", "--repeats", "1"]
+    argv += ["--throughput-episodes", "0"]
     assert main([*argv, "--out", str(out)]) == 0
     result = json.loads(out.read_text())
     (entry,) = result["episodes"]
