@@ -77,7 +77,7 @@ model: $(STAMP)
 	$(BIN)/peg-sim model --out $(OUT)/model
 
 calibrate: $(STAMP)
-	$(BIN)/peg-sim calibrate
+	$(BIN)/peg-sim calibrate --replace-packaged
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

@@ -49,6 +49,7 @@ __all__ = [
     "UnknownController",
     "controller_names",
     "make_controller",
+    "register_controller",
 ]
 
 #: Controller name -> its config class (whose ``build(model)`` makes the controller).
@@ -63,6 +64,30 @@ UnknownController = UnknownComponent
 def controller_names() -> list[str]:
     """The registered controller names, sorted."""
     return sorted(REGISTRY)
+
+
+def register_controller(config_cls: type[ControllerConfig], *, replace: bool = False) -> None:
+    """Add a controller to :data:`REGISTRY` under its config's ``name``, so that configs,
+    experiment files and ``gymnasium.make`` can name it.
+
+    Sweep workers are new processes that import the main module again: register at the top
+    level of your script or in a module the workers import (Ray workers need it importable).
+
+    Raises:
+        ConfigError: ``config_cls`` is not a :class:`ControllerConfig` subclass with a ``name``,
+            or the name is taken (unless ``replace``).
+    """
+    if not (isinstance(config_cls, type) and issubclass(config_cls, ControllerConfig)):
+        raise ConfigError(f"register_controller: expected a ControllerConfig subclass, got {config_cls!r}")
+    name = getattr(config_cls, "name", None)
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"register_controller: {config_cls.__name__} has no name (set name: ClassVar[str])")
+    if name in REGISTRY and REGISTRY[name] is not config_cls and not replace:
+        raise ConfigError(
+            f"register_controller: the name {name!r} is taken by {REGISTRY[name].__name__}; "
+            "pass replace=True to replace it"
+        )
+    REGISTRY[name] = config_cls
 
 
 def make_controller(

@@ -1,30 +1,55 @@
-"""Summary statistics, plots and the Markdown report of a sweep (also ``peg-sim plot DIR``)."""
+"""Summary statistics, plots and the Markdown report of a sweep (also ``peg-sim plot DIR``).
+
+Every table and plot is drawn from ``episodes.csv`` alone, except the two that need the
+episodes' force traces (``episodes/<key>/forces.npz``): the aligned force profiles and force
+against depth, which are left out (and the report says so) when the traces are not there.
+"""
 
 from __future__ import annotations
 
 import csv
+import json
 import math
-from collections import Counter, defaultdict
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from peg_ctrl.experiments.stats import ALPHA, compare_arms, median_ci
+from peg_ctrl.experiments.stats import ALPHA, compare_arms, episodes_frame, median_ci, wilson_interval
 from peg_ctrl.monitors import FIRST_CONTACT_N
 
-__all__ = ["wilson_interval", "summarise", "write_report", "read_rows"]
+__all__ = ["wilson_interval", "summarise", "write_report", "read_rows", "arm_of", "swept_conditions"]
 
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval of a success rate."""
-    if n == 0:
-        return (0.0, 1.0)
-    p = successes / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+# Swept episode fields with a readable axis: column -> (label, factor from the column's unit).
+_CONDITION_LABELS = {
+    "clearance_m": ("radial hole clearance [mm]", 1e3),
+    "task.lateral_error": ("lateral error at first contact [mm]", 1e3),
+    "task.tilt_error": ("peg tilt in the grasp [deg]", 180.0 / math.pi),
+    "task.position_noise": ("noise on the observed hole position [mm]", 1e3),
+    "peg_mass_scale": ("peg mass scale (drawn per seed)", 1.0),
+    "friction_scale": ("friction scale (drawn per seed)", 1.0),
+    "gain_scale": ("controller gain scale (drawn per seed)", 1.0),
+}
+_DOMAIN_COLUMNS = ("peg_mass_scale", "friction_scale", "gain_scale")
+_MAX_LEVELS = 6  # a condition with more distinct values than this is drawn in quartile bins
+_SEATED, _FAILED = "#2ca02c", "#d62728"
+_CAPTIONS = {
+    "force_profiles.png": "Per arm, the median (line) and 10-90 % band of the contact force against "
+    "time, aligned at the first peg-block contact (held insertion) or at the start of the insert "
+    "(else release) phase (dotted line).",
+    "success_vs_clearance.png": "Success rate with 95 % Wilson intervals at each clearance, pooled "
+    "over the other conditions; one row of panels per strategy, one colour per controller.",
+    "success_vs_disturbance.png": "Success rate with 95 % Wilson intervals against each condition "
+    "the experiment varies, pooled over the others; one row of panels per strategy, one colour per "
+    "controller. A condition drawn per seed (mass, friction, gain scale) is grouped in quartile "
+    "bins, plotted at the bin's median.",
+    "peak_force.png": "The peak peg-block force of every episode (dots: green inserted, red failed), "
+    "its distribution (violin) and box (median, quartiles, whiskers to 1.5 IQR) per arm.",
+    "failures.png": "Episodes per arm: inserted, or the failure reason and the phase the episode ended in.",
+    "force_vs_depth.png": "Peg-block force against the depth of the peg's lower end, from the first "
+    "contact, for up to 12 episodes per arm.",
+}
 
 
 def _float(value: Any) -> float | None:
@@ -39,40 +64,32 @@ def arm_of(row: dict[str, Any]) -> str:
 
 
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per arm (controller/strategy) x planner x clearance: rates, intervals, force and time statistics."""
-    groups: dict[tuple[str, str, float], list[dict[str, Any]]] = defaultdict(list)
-    order: list[tuple[str, str, float]] = []
-    for row in rows:
-        key = (arm_of(row), row["planner"], float(row["clearance_m"]))
-        if key not in groups:
-            order.append(key)
-        groups[key].append(row)
+    """Per arm (controller/strategy) x planner x clearance, in order of first appearance: success
+    rate with its 95 % Wilson interval, peak peg-block force [N] median (bootstrap 95 % interval)
+    and p95, time to insert [s] median (interval), contact to seated [s], impulse [N s] median
+    and the failure reasons."""
+    if not rows:
+        return []
+    df = episodes_frame(rows)
+    df["won"] = df["status"] == "success"
     out = []
-    for key in order:
-        group = groups[key]
+    for (arm, planner, clearance), group in df.groupby(["arm", "planner", "clearance_m"], sort=False):
         n = len(group)
-        wins = sum(r["status"] == "success" for r in group)
+        wins = int(group["won"].sum())
         lo, hi = wilson_interval(wins, n)
-        forces = np.array([_float(r["peak_contact_force_n"]) for r in group], dtype=float)
-        times = [
-            t
-            for t in (_float(r["time_to_insert_s"]) for r in group if r["status"] == "success")
-            if t is not None
-        ]
-        reasons = Counter(r["reason"] for r in group if r["status"] != "success")
+        forces = group["peak_contact_force_n"].to_numpy(dtype=float)
+        won = group[group["won"]]
+        times = won["time_to_insert_s"].dropna().tolist()
+        seat = won["contact_to_seat_s"].dropna().tolist() if "contact_to_seat_s" in won else []
+        impulses = group["contact_impulse_ns"].dropna().tolist() if "contact_impulse_ns" in group else []
+        reasons = group.loc[~group["won"], "reason"].value_counts().sort_index()
         force_ci = median_ci(forces.tolist())
         time_ci = median_ci(times)
-        seat = [
-            t
-            for t in (_float(r.get("contact_to_seat_s")) for r in group if r["status"] == "success")
-            if t is not None
-        ]
-        impulses = [x for x in (_float(r.get("contact_impulse_ns")) for r in group) if x is not None]
         out.append(
             {
-                "controller": key[0],
-                "planner": key[1],
-                "clearance_m": key[2],
+                "controller": str(arm),
+                "planner": str(planner),
+                "clearance_m": float(clearance),
                 "episodes": n,
                 "successes": wins,
                 "success_rate": wins / n,
@@ -87,207 +104,346 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "time_to_insert_median_ci95_high_s": time_ci[2],
                 "contact_to_seat_median_s": float(np.median(seat)) if seat else None,
                 "impulse_median_ns": float(np.median(impulses)) if impulses else None,
-                "failure_reasons": ";".join(f"{k}:{v}" for k, v in sorted(reasons.items())),
+                "failure_reasons": ";".join(f"{k}:{v}" for k, v in reasons.items()),
             }
         )
     return out
 
 
 def read_rows(out_dir: Path) -> list[dict[str, Any]]:
+    """The rows of ``out_dir/episodes.csv`` (values as strings)."""
     with open(Path(out_dir) / "episodes.csv", newline="") as fh:
         return list(csv.DictReader(fh))
 
 
+def swept_conditions(df: Any) -> list[str]:
+    """The columns of an :func:`~peg_ctrl.experiments.stats.episodes_frame` that the experiment
+    varies and that success can be plotted against: the clearance, every grid key (dotted
+    column) and the per-seed domain draws, each when it takes more than one value."""
+    candidates = ["clearance_m", *[c for c in df.columns if "." in c], *_DOMAIN_COLUMNS]
+    found = []
+    for column in candidates:
+        if column not in df:
+            continue
+        values = _numeric(df[column])
+        if values.notna().all() and values.nunique() > 1:
+            found.append(column)
+    return found
+
+
+def _numeric(series: Any) -> Any:
+    import pandas as pd
+
+    return pd.to_numeric(series.replace("", np.nan), errors="coerce").astype(float)
+
+
+def _split_arm(arm: str) -> tuple[str, str]:
+    controller, _, strategy = arm.partition("/")
+    return controller, strategy
+
+
+def _controller_colours(arms: list[str]) -> dict[str, Any]:
+    """One colour per controller (strategies of one controller share it), from tab10/tab20."""
+    import matplotlib
+
+    controllers = list(dict.fromkeys(_split_arm(a)[0] for a in arms))
+    cmap = matplotlib.colormaps["tab10" if len(controllers) <= 10 else "tab20"]
+    return {c: cmap(i % cmap.N) for i, c in enumerate(controllers)}
+
+
 def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """Draw the report's plots into ``out_dir``; returns (title, file name) of each one drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
+
+    df = episodes_frame(rows)
+    df["won"] = df["status"] == "success"
+    arms = list(dict.fromkeys(df["arm"]))
+    made: list[tuple[str, str]] = []
+    traced = _has_traces(out_dir, df)
+    if traced:
+        made.append(_force_profiles(out_dir, df, arms))
+    conditions = swept_conditions(df)
+    if "clearance_m" in conditions:
+        made.append(
+            _success_curves(out_dir, df, arms, ["clearance_m"], "success_vs_clearance.png", log_x=True)
+        )
+    others = [c for c in conditions if c != "clearance_m"]
+    if others:
+        made.append(_success_curves(out_dir, df, arms, others, "success_vs_disturbance.png"))
+    made.append(_peak_force(out_dir, df, arms))
+    made.append(_outcomes(out_dir, df, arms))
+    if traced and "task" in df and (df["task"] == "held_insertion").any():
+        made.append(_force_vs_depth(out_dir, df, arms))
+    return made
+
+
+def _save(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    made: list[tuple[str, str]] = []
-    controllers = list(dict.fromkeys(arm_of(r) for r in rows))
-    colours = {c: f"C{i}" for i, c in enumerate(controllers)}
+    fig.savefig(path)
+    plt.close(fig)
 
-    # 1. Force profiles around the release, median and 10-90 % band per controller.
+
+def _episode_dir(out_dir: Path, log_path: Any) -> Path:
+    return out_dir / Path(str(log_path)).parent
+
+
+def _has_traces(out_dir: Path, df: Any) -> bool:
+    """Whether the sweep's episode directories (with their force traces) are present."""
+    if "log_path" not in df:
+        return False
+    return any((_episode_dir(out_dir, p) / "forces.npz").is_file() for p in df["log_path"])
+
+
+def _force_profiles(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
+    """Per arm, one panel: the peg-block (and peg-table, if ever touched) force against the time
+    from the first contact (held insertion) or the insert/release phase, median and 10-90 %."""
+    import matplotlib.pyplot as plt
+
     grid = np.linspace(-1.0, 2.0, 301)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), dpi=110, sharex=True)
-    for ctrl in controllers:
-        for ax, column in zip(axes, ("block-peg", "peg-table"), strict=True):
-            curves = []
-            for r in rows:
-                if arm_of(r) != ctrl:
-                    continue
-                curve = _aligned_force(out_dir / Path(r["log_path"]).parent, column, grid)
-                if curve is not None:
-                    curves.append(curve)
-            if not curves:
+    columns = {"block-peg": ("peg-block", "C0"), "peg-table": ("peg-table", "C1")}
+    curves: dict[str, dict[str, list[np.ndarray]]] = {a: {c: [] for c in columns} for a in arms}
+    for arm, log_path in zip(df["arm"], df["log_path"], strict=True):
+        aligned = _aligned_forces(_episode_dir(out_dir, log_path), tuple(columns), grid)
+        for column, curve in (aligned or {}).items():
+            curves[arm][column].append(curve)
+    touched = [c for c in columns if any(np.nanmax(x, initial=0.0) > 0 for a in arms for x in curves[a][c])]
+    ncols = min(4, len(arms))
+    nrows = math.ceil(len(arms) / ncols)
+    fig, axes = plt.subplots(
+        nrows,
+        ncols,
+        figsize=(3.4 * ncols + 0.6, 2.5 * nrows + 0.8),
+        dpi=110,
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+        layout="constrained",
+    )
+    for ax, arm in zip(axes.flat, arms, strict=False):
+        n = 0
+        for column in touched or ["block-peg"]:
+            label, colour = columns[column]
+            if not curves[arm][column]:
                 continue
-            stack = np.vstack(curves)
-            ax.plot(grid, np.median(stack, axis=0), color=colours[ctrl], label=f"{ctrl} (n={len(curves)})")
-            ax.fill_between(
-                grid,
-                np.percentile(stack, 10, axis=0),
-                np.percentile(stack, 90, axis=0),
-                color=colours[ctrl],
-                alpha=0.2,
-            )
-    for ax, title in zip(axes, ("peg-block contact force", "peg-table contact force"), strict=True):
-        ax.set_title(title + " (median, 10-90 %)")
-        ax.set_xlabel("time from the start of the insert (or else release) phase [s]")
-        ax.set_ylabel("net force [N]")
-        ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / "force_profiles.png")
-    plt.close(fig)
-    made.append(("Force profiles", "force_profiles.png"))
-
-    # 2. Success rate vs clearance with Wilson intervals (when the sweep has more than one).
-    if len({s["clearance_m"] for s in summary}) > 1:
-        made.append(_success_vs_clearance(out_dir, summary, controllers, colours))
-
-    # 3. Peak peg-block force per controller.
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
-    data = [[float(r["peak_contact_force_n"]) for r in rows if arm_of(r) == c] for c in controllers]
-    ax.boxplot(data, showfliers=True)
-    ax.set_xticks(range(1, len(controllers) + 1), controllers, rotation=20, ha="right", fontsize=8)
-    ax.set_ylabel("peak peg-block contact force [N]")
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out_dir / "peak_force.png")
-    plt.close(fig)
-    made.append(("Peak contact force", "peak_force.png"))
-
-    # 4. Failure reasons by phase.
-    failures = Counter((r["reason"], r["phase"]) for r in rows if r["status"] != "success")
-    fig, ax = plt.subplots(figsize=(7, 3.5), dpi=110)
-    if failures:
-        labels = [f"{reason}\n({phase})" for reason, phase in failures]
-        ax.bar(range(len(failures)), list(failures.values()), color="C3")
-        ax.set_xticks(range(len(failures)), labels, fontsize=8)
-    else:
-        ax.text(0.5, 0.5, "no failures", ha="center", va="center", transform=ax.transAxes)
-    ax.set_ylabel("episodes")
-    ax.set_title("Failure reasons by phase")
-    fig.tight_layout()
-    fig.savefig(out_dir / "failures.png")
-    plt.close(fig)
-    made.append(("Failure reasons by phase", "failures.png"))
-    made += _contact_plots(out_dir, rows, controllers, colours)
-    return made
-
-
-def _success_vs_clearance(
-    out_dir: Path, summary: list[dict[str, Any]], controllers: list[str], colours: dict[str, str]
-) -> tuple[str, str]:
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
-    for ctrl in controllers:
-        pts = sorted((s["clearance_m"], s) for s in summary if s["controller"] == ctrl)
-        x = np.array([p[0] for p in pts]) * 1e3
-        y = np.array([p[1]["success_rate"] for p in pts])
-        lo = np.clip(y - np.array([p[1]["success_ci95_low"] for p in pts]), 0.0, None)
-        hi = np.clip(np.array([p[1]["success_ci95_high"] for p in pts]) - y, 0.0, None)
-        ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, color=colours[ctrl], label=ctrl)
-    ax.set_xscale("log")
-    ax.set_xlabel("radial hole clearance [mm]")
-    ax.set_ylabel("success rate (95 % Wilson interval)")
-    ax.set_ylim(-0.05, 1.05)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / "success_vs_clearance.png")
-    plt.close(fig)
-    return ("Success rate vs clearance", "success_vs_clearance.png")
-
-
-def _condition_success(rows: list[dict[str, Any]], arm: str, column: str) -> list[tuple[float, int, int]]:
-    """(value, successes, episodes) per value of ``column`` for one arm, pooled over the rest."""
-    counts: dict[float, list[int]] = defaultdict(lambda: [0, 0])
-    for r in rows:
-        if arm_of(r) == arm and r.get(column) not in (None, ""):
-            c = counts[float(r[column])]
-            c[0] += r["status"] == "success"
-            c[1] += 1
-    return [(v, k, n) for v, (k, n) in sorted(counts.items())]
-
-
-def _contact_plots(
-    out_dir: Path, rows: list[dict[str, Any]], arms: list[str], colours: dict[str, str]
-) -> list[tuple[str, str]]:
-    """Success vs each swept disturbance, and force-vs-depth traces, per arm (contact studies)."""
-    import matplotlib.pyplot as plt
-
-    made: list[tuple[str, str]] = []
-    conditions = [
-        (column, label, scale)
-        for column, label, scale in (
-            ("task.lateral_error", "lateral error at first contact [mm]", 1e3),
-            ("task.tilt_error", "peg tilt in the grasp [deg]", 180.0 / math.pi),
-            ("task.position_noise", "noise on the observed hole position [mm]", 1e3),
-        )
-        if any(r.get(column) not in (None, "") for r in rows)
-    ]
-    if conditions:
-        fig, axes = plt.subplots(
-            1, len(conditions), figsize=(6 * len(conditions), 4.2), dpi=110, squeeze=False
-        )
-        for ax, (column, label, scale) in zip(axes[0], conditions, strict=True):
-            for i, arm in enumerate(arms):
-                pts = _condition_success(rows, arm, column)
-                if not pts:
-                    continue
-                x = np.array([p[0] for p in pts]) * scale
-                x = x + (i - (len(arms) - 1) / 2) * 0.012 * (x.max() - x.min() or 1.0)  # dodge
-                y = np.array([k / n for _, k, n in pts])
-                ci = np.array([wilson_interval(k, n) for _, k, n in pts])
-                ax.errorbar(
-                    x,
-                    y,
-                    yerr=[np.clip(y - ci[:, 0], 0.0, None), np.clip(ci[:, 1] - y, 0.0, None)],  # round-off
-                    marker="o",
-                    capsize=3,
-                    color=colours[arm],
-                    label=arm,
+            stack = np.vstack(curves[arm][column])
+            n = len(stack)
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # depths no episode reached: NaN
+                ax.fill_between(
+                    grid,
+                    np.nanpercentile(stack, 10, axis=0),
+                    np.nanpercentile(stack, 90, axis=0),
+                    color=colour,
+                    alpha=0.25,
+                    lw=0,
                 )
-            ax.set_xlabel(label)
-            ax.set_ylabel("success rate (95 % Wilson interval)")
-            ax.set_ylim(-0.05, 1.05)
-            ax.grid(alpha=0.3)
-        axes[0][0].legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(out_dir / "success_vs_disturbance.png")
-        plt.close(fig)
-        made.append(("Success vs disturbance", "success_vs_disturbance.png"))
+                ax.plot(grid, np.nanmedian(stack, axis=0), color=colour, lw=1.2, label=label)
+        ax.axvline(0.0, color="0.4", lw=0.8, ls=":")
+        ax.set_title(f"{arm} (n={n})", fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(arms) :]:
+        ax.set_visible(False)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(
+            handles, [f"{x} force: median, 10-90 %" for x in labels], loc="outside upper center", ncol=2
+        )
+    fig.supxlabel("time from the first peg-block contact (held insertion) or the insert/release phase [s]")
+    fig.supylabel("net contact force [N]")
+    _save(fig, out_dir / "force_profiles.png")
+    return ("Force profiles", "force_profiles.png")
 
-    # Force against depth, a few episodes per arm.
-    held = [r for r in rows if r.get("task") == "held_insertion"]
-    if held:
-        cols = min(3, len(arms))
-        nrows = math.ceil(len(arms) / cols)
-        fig, axes = plt.subplots(nrows, cols, figsize=(5.2 * cols, 3.6 * nrows), dpi=110, squeeze=False)
-        for ax, arm in zip(axes.flat, arms, strict=False):
-            picked = [r for r in held if arm_of(r) == arm][:: max(1, len(held) // (len(arms) * 12))][:12]
-            for r in picked:
-                trace = _trace(out_dir / Path(r["log_path"]).parent)
-                if trace is None:
+
+def _success_curves(
+    out_dir: Path, df: Any, arms: list[str], conditions: list[str], name: str, *, log_x: bool = False
+) -> tuple[str, str]:
+    """Success rate with 95 % Wilson intervals against each swept condition (columns), one row
+    of panels per strategy, one line per controller; pooled over the other conditions."""
+    import matplotlib.pyplot as plt
+
+    strategies = list(dict.fromkeys(_split_arm(a)[1] for a in arms))
+    colours = _controller_colours(arms)
+    fig, axes = plt.subplots(
+        len(strategies),
+        len(conditions),
+        figsize=(4.6 * len(conditions) + 0.4, 2.9 * len(strategies) + 0.9),
+        dpi=110,
+        sharey=True,
+        squeeze=False,
+        layout="constrained",
+    )
+    for j, column in enumerate(conditions):
+        label, scale = _CONDITION_LABELS.get(column, (column, 1.0))
+        table = _success_table(df, column)
+        for i, strategy in enumerate(strategies):
+            ax = axes[i][j]
+            members = [a for a in arms if _split_arm(a)[1] == strategy]
+            for k, arm in enumerate(members):
+                pts = table[table["arm"] == arm]
+                if pts.empty:
                     continue
-                depth, force = trace
-                ok = r["status"] == "success"
-                ax.plot(depth * 1e3, force, lw=0.7, alpha=0.7, color="C2" if ok else "C3")
-            ax.set_title(f"{arm} (green: seated, red: not)", fontsize=9)
-            ax.set_xlabel("depth of the peg's lower end [mm]")
-            ax.set_ylabel("peg-block force [N]")
-            ax.grid(alpha=0.3)
-        for ax in list(axes.flat)[len(arms) :]:
-            ax.set_visible(False)
-        fig.tight_layout()
-        fig.savefig(out_dir / "force_vs_depth.png")
-        plt.close(fig)
-        made.append(("Force against depth", "force_vs_depth.png"))
-    return made
+                x = pts["x"].to_numpy() * scale
+                offset = (k - (len(members) - 1) / 2) * 0.012
+                x = x * (1.0 + 2 * offset) if log_x else x + offset * (np.ptp(x) or 1.0)  # dodge
+                y = pts["rate"].to_numpy()
+                err = [np.clip(y - pts["low"], 0.0, None), np.clip(pts["high"] - y, 0.0, None)]
+                controller = _split_arm(arm)[0]
+                ax.errorbar(
+                    x, y, yerr=err, marker="o", ms=4, capsize=3, color=colours[controller], label=controller
+                )
+            if log_x:  # ticks at the swept values, written plainly
+                ax.set_xscale("log")
+                levels = np.unique(table["x"].to_numpy() * scale)
+                ax.set_xticks(levels, [f"{v:g}" for v in levels])
+                ax.minorticks_off()
+            ax.set_ylim(-0.05, 1.05)
+            ax.grid(alpha=0.3, which="both")
+            if strategy:
+                ax.set_title(f"strategy: {strategy}", fontsize=9)
+            if i == len(strategies) - 1:
+                ax.set_xlabel(label + (" (quartile bins)" if table.attrs.get("binned") else ""))
+    handles: dict[str, Any] = {}
+    for ax in axes.flat:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(list(handles.values()), list(handles), loc="outside upper center", ncol=min(6, len(handles)))
+    fig.supylabel("success rate (95 % Wilson interval)")
+    _save(fig, out_dir / name)
+    title = "Success rate vs clearance" if name == "success_vs_clearance.png" else "Success vs disturbance"
+    return (title, name)
+
+
+def _success_table(df: Any, column: str) -> Any:
+    """Per arm and level of ``column``: x (the level, or the median of a quartile bin), successes
+    ``k`` of ``n``, ``rate`` and its Wilson interval ``low``/``high``."""
+    import pandas as pd
+
+    values = _numeric(df[column])
+    binned = values.nunique() > _MAX_LEVELS
+    if binned:
+        bins = pd.qcut(values, q=4, duplicates="drop")
+        x = values.groupby(bins, observed=True).transform("median")
+    else:
+        x = values
+    table = df.assign(x=x).groupby(["arm", "x"], sort=True)["won"].agg(k="sum", n="count").reset_index()
+    ci = [wilson_interval(int(k), int(n)) for k, n in zip(table["k"], table["n"], strict=True)]
+    table["rate"] = table["k"] / table["n"]
+    table["low"] = [c[0] for c in ci]
+    table["high"] = [c[1] for c in ci]
+    table.attrs["binned"] = binned
+    return table
+
+
+def _peak_force(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
+    """Per arm: the distribution of the peak peg-block force (violin, box, and every episode as
+    a dot, green inserted, red not)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    colours = _controller_colours(arms)
+    rng = np.random.default_rng(0)  # the dots' horizontal jitter only
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.8 * len(arms) + 2.0), 4.6), dpi=110, layout="constrained")
+    for i, arm in enumerate(arms):
+        group = df[df["arm"] == arm]
+        y = group["peak_contact_force_n"].to_numpy(dtype=float)
+        ok = group["won"].to_numpy()
+        keep = np.isfinite(y)
+        y, ok = y[keep], ok[keep]
+        if len(y) == 0:
+            continue
+        if len(y) >= 2 and np.ptp(y) > 0:
+            violin: Any = ax.violinplot([y], positions=[i], widths=0.8, showextrema=False)
+            for body in violin["bodies"]:
+                body.set_facecolor(colours[_split_arm(arm)[0]])
+                body.set_alpha(0.3)
+        ax.boxplot(
+            [y],
+            positions=[i],
+            widths=0.22,
+            showfliers=False,
+            medianprops={"color": "k"},
+            boxprops={"color": "0.2"},
+            whiskerprops={"color": "0.2"},
+            capprops={"color": "0.2"},
+        )
+        jitter = rng.uniform(-0.2, 0.2, len(y))
+        ax.scatter(i + jitter, y, s=7, c=np.where(ok, _SEATED, _FAILED), alpha=0.6, lw=0, zorder=3)
+    ax.set_xticks(range(len(arms)), arms, rotation=25, ha="right", fontsize=8)
+    ax.set_xlim(-0.6, len(arms) - 0.4)
+    ax.set_ylabel("peak peg-block contact force [N]")
+    ax.set_title("Peak peg-block force per arm (every episode a dot)", fontsize=10)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(
+        handles=[
+            Line2D([], [], marker="o", ls="", color=_SEATED, label="inserted"),
+            Line2D([], [], marker="o", ls="", color=_FAILED, label="failed"),
+        ],
+        fontsize=8,
+        loc="upper right",
+    )
+    _save(fig, out_dir / "peak_force.png")
+    return ("Peak contact force", "peak_force.png")
+
+
+def _outcomes(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
+    """Per arm: episodes inserted and failed, the failures by reason and the phase they ended in."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    outcome = np.where(df["won"], "inserted", df["reason"].astype(str) + " (" + df["phase"].astype(str) + ")")
+    counts = df.assign(outcome=outcome).groupby(["arm", "outcome"]).size().unstack(fill_value=0)
+    counts = counts.reindex(index=arms, fill_value=0)
+    kinds = ["inserted"] if "inserted" in counts else []
+    kinds += sorted(c for c in counts.columns if c != "inserted")
+    tab20 = matplotlib.colormaps["tab20"]
+    palette = [tab20(i) for i in range(20) if i not in (4, 5)]  # no green: green is "inserted"
+    fig, ax = plt.subplots(figsize=(8.5, 0.42 * len(arms) + 1.6), dpi=110, layout="constrained")
+    left = np.zeros(len(arms))
+    for k, kind in enumerate(kinds):
+        values = counts[kind].to_numpy(dtype=float)
+        colour = _SEATED if kind == "inserted" else palette[(k - 1) % len(palette)]
+        ax.barh(range(len(arms)), values, left=left, color=colour, label=kind, height=0.7)
+        left += values
+    ax.set_yticks(range(len(arms)), arms, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("episodes")
+    ax.set_title("Outcome per arm: inserted, or the failure reason (phase it ended in)", fontsize=10)
+    ax.grid(alpha=0.3, axis="x")
+    fig.legend(fontsize=7, loc="outside right upper")
+    _save(fig, out_dir / "failures.png")
+    return ("Outcome per arm", "failures.png")
+
+
+def _force_vs_depth(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
+    """Peg-block force against the depth of the peg's lower end, up to 12 episodes per arm."""
+    import matplotlib.pyplot as plt
+
+    held = df[df["task"] == "held_insertion"]
+    cols = min(3, len(arms))
+    nrows = math.ceil(len(arms) / cols)
+    fig, axes = plt.subplots(
+        nrows, cols, figsize=(5.2 * cols, 3.4 * nrows + 0.4), dpi=110, squeeze=False, layout="constrained"
+    )
+    step = max(1, len(held) // (len(arms) * 12))
+    for ax, arm in zip(axes.flat, arms, strict=False):
+        picked = held[held["arm"] == arm].iloc[::step].head(12)
+        for log_path, ok in zip(picked["log_path"], picked["won"], strict=True):
+            trace = _trace(_episode_dir(out_dir, log_path))
+            if trace is None:
+                continue
+            depth, force = trace
+            ax.plot(depth * 1e3, force, lw=0.7, alpha=0.7, color=_SEATED if ok else _FAILED)
+        ax.set_title(f"{arm} (green: seated, red: not)", fontsize=9)
+        ax.set_xlabel("depth of the peg's lower end [mm]")
+        ax.set_ylabel("peg-block force [N]")
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(arms) :]:
+        ax.set_visible(False)
+    _save(fig, out_dir / "force_vs_depth.png")
+    return ("Force against depth", "force_vs_depth.png")
 
 
 def _trace(episode_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
@@ -308,10 +464,11 @@ def _trace(episode_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
     return data[start:, columns.index("peg_depth_m")], force[start:]
 
 
-def _aligned_force(episode_dir: Path, column: str, grid: np.ndarray) -> np.ndarray | None:
-    """The episode's force ``column`` on ``grid``, time measured from the release phase start."""
-    import json
-
+def _aligned_forces(
+    episode_dir: Path, columns: tuple[str, ...], grid: np.ndarray
+) -> dict[str, np.ndarray] | None:
+    """The episode's force ``columns`` [N] on ``grid`` [s], time measured from its first
+    peg-block contact (held insertion) or the start of its insert (else release) phase."""
     summary = episode_dir / "summary.json"
     trace = episode_dir / "forces.npz"
     if not (summary.is_file() and trace.is_file()):
@@ -325,12 +482,16 @@ def _aligned_force(episode_dir: Path, column: str, grid: np.ndarray) -> np.ndarr
     if not starts:
         return None
     with np.load(trace) as npz:
-        columns = [str(c) for c in npz["columns"]]
+        names = [str(c) for c in npz["columns"]]
         data = npz["data"]
-    if column not in columns or len(data) == 0:
+    if len(data) == 0:
         return None
-    t = data[:, columns.index("t")] - starts[0]
-    return np.interp(grid, t, data[:, columns.index(column)], left=np.nan, right=np.nan)
+    t = data[:, names.index("t")] - starts[0]
+    return {
+        c: np.interp(grid, t, data[:, names.index(c)], left=np.nan, right=np.nan)
+        for c in columns
+        if c in names
+    }
 
 
 def _interval(lo: float | None, hi: float | None, fmt: str) -> str:
@@ -378,11 +539,15 @@ def _comparison_section(rows: list[dict[str, Any]]) -> list[str]:
 
 def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
     """Success and median peak force per arm in every grid cell (contact studies)."""
-    keys = [k for k in (rows[0] if rows else {}) if "." in k]  # the grid's dotted keys
+    df = episodes_frame(rows)
+    keys = [k for k in df.columns if "." in k]  # the grid's dotted keys
     if not keys:
         return []
-    cells = list(dict.fromkeys(tuple(r[k] for k in keys) for r in rows))
-    arms = list(dict.fromkeys(arm_of(r) for r in rows))
+    df["won"] = df["status"] == "success"
+    cells = list(dict.fromkeys(df[keys].itertuples(index=False, name=None)))
+    by_cell = df.groupby(["arm", *keys], sort=False).agg(
+        wins=("won", "sum"), n=("won", "size"), force=("peak_contact_force_n", "median")
+    )
     lines = [
         "## Success per grid cell",
         "",
@@ -395,14 +560,15 @@ def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
         + " |",
         "|---|" + "---|" * len(cells),
     ]
-    for arm in arms:
+    for arm in dict.fromkeys(df["arm"]):
         cells_text = []
         for c in cells:
-            group = [r for r in rows if arm_of(r) == arm and tuple(r[k] for k in keys) == c]
-            wins = sum(r["status"] == "success" for r in group)
-            forces = [float(r["peak_contact_force_n"]) for r in group]
-            med = f"{np.median(forces):.1f} N" if forces else "–"
-            cells_text.append(f"{wins}/{len(group)}, {med}")
+            key = (arm, *c)
+            if key in by_cell.index:
+                wins, n, force = by_cell.loc[key]
+                cells_text.append(f"{int(wins)}/{int(n)}, {force:.1f} N")
+            else:
+                cells_text.append("0/0, –")
         lines.append(f"| {arm} | " + " | ".join(cells_text) + " |")
     return [*lines, ""]
 
@@ -424,9 +590,7 @@ def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
 
 
 def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
-    """Draw the plots and write ``report.md`` from the saved ``episodes.csv``."""
-    import json
-
+    """Draw the plots and write ``report.md`` from the saved ``episodes.csv``; returns its path."""
     out_dir = Path(out_dir)
     rows = read_rows(out_dir)
     summary = summarise(rows)
@@ -480,8 +644,14 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         *_cell_section(rows),
         *_comparison_section(rows),
     ]
+    if rows and "force_profiles.png" not in {name for _, name in plots}:
+        parts += [
+            "The episodes' force traces (`episodes/<key>/forces.npz`) are not in this directory, so "
+            "the force profiles and force against depth are not drawn.",
+            "",
+        ]
     for title, name in plots:
-        parts += [f"## {title}", "", f"![{title}]({name})", ""]
+        parts += [f"## {title}", "", _CAPTIONS.get(name, ""), "", f"![{title}]({name})", ""]
     path = out_dir / "report.md"
     path.write_text("\n".join(parts))
     return path

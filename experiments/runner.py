@@ -188,7 +188,7 @@ def run_sweep(
     report: bool = True,
 ) -> list[dict[str, Any]]:
     """Run (or resume) ``exp`` into ``out_dir``; returns one row per episode, in job order."""
-    from tqdm import tqdm
+    from peg_ctrl.progress import progress_bar
 
     if backend not in BACKENDS:
         raise UnknownComponent("backend", backend, BACKENDS)
@@ -212,8 +212,8 @@ def run_sweep(
     done_before = len(jobs) - len(tasks)
     started = time.perf_counter()
     try:
-        with tqdm(
-            total=len(jobs), initial=done_before, desc=exp.name, unit="ep", disable=not progress
+        with progress_bar(
+            total=len(jobs), initial=done_before, desc=exp.name, unit="ep", enabled=progress
         ) as bar:
             successes = 0
             runner = BACKENDS[backend]

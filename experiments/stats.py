@@ -1,11 +1,11 @@
 """Statistics of a sweep: which arms (controller x planner) differ, and by how much.
 
-- Success: Wilson 95 % intervals per arm; pairwise Boschloo exact tests (two-sided, more
-  powerful than Fisher's for 2x2 tables with fixed group sizes), Holm-corrected over all pairs
-  compared at one clearance.
+- Success: Wilson 95 % intervals per arm (:func:`wilson_interval`, ``scipy.stats.binomtest``);
+  pairwise Boschloo exact tests (two-sided, more powerful than Fisher's for 2x2 tables with fixed
+  group sizes), Holm-corrected over all pairs compared at one clearance.
 - Peak force and time to insert (for held insertion: from first contact to seated): the median
-  with a 95 % bootstrap interval (percentile method, fixed seed) per arm; pairwise two-sided
-  Mann-Whitney U tests, Holm-corrected likewise.
+  with a 95 % bootstrap interval (percentile method, fixed seed, ``scipy.stats.bootstrap``) per
+  arm; pairwise two-sided Mann-Whitney U tests, Holm-corrected likewise.
 
 Every p-value reported is the Holm-adjusted one; a pair "differs" in a metric when it is below
 ``ALPHA``. Nothing is tested with fewer than two samples per side (the entry is then None).
@@ -17,15 +17,20 @@ import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+
+from peg_ctrl.errors import ConfigError
 
 __all__ = [
     "ALPHA",
     "holm",
+    "wilson_interval",
     "success_test",
     "location_test",
     "median_ci",
+    "episodes_frame",
     "PairComparison",
     "compare_arms",
 ]
@@ -35,15 +40,44 @@ _BOOTSTRAP_RESAMPLES = 2000
 
 
 def holm(p_values: Sequence[float | None]) -> list[float | None]:
-    """Holm-Bonferroni adjusted p-values (step-down, monotone, capped at 1); None stays None."""
-    indexed = [(p, i) for i, p in enumerate(p_values) if p is not None]
-    m = len(indexed)
+    """Holm-Bonferroni adjusted p-values (step-down, monotone, capped at 1); None stays None.
+
+    The ``i``-th smallest of ``m`` p-values is multiplied by ``m - i`` and the running maximum
+    taken (SciPy's ``false_discovery_control`` offers only the Benjamini-Hochberg/Yekutieli
+    procedures, which control a different error rate).
+    """
+    tested = [i for i, p in enumerate(p_values) if p is not None]
     adjusted: list[float | None] = [None] * len(p_values)
-    running = 0.0
-    for rank, (p, i) in enumerate(sorted(indexed)):
-        running = max(running, min(1.0, (m - rank) * p))
-        adjusted[i] = running
+    if not tested:
+        return adjusted
+    p = np.array([p_values[i] for i in tested], dtype=float)
+    order = np.argsort(p, kind="stable")
+    m = len(p)
+    scaled = np.minimum(1.0, (m - np.arange(m)) * p[order])
+    for rank, value in zip(order, np.maximum.accumulate(scaled), strict=True):
+        adjusted[tested[rank]] = float(value)
     return adjusted
+
+
+def wilson_interval(successes: int, n: int, *, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval (low, high) of a success rate, as fractions in [0, 1].
+
+    ``successes`` of ``n`` episodes; ``confidence`` level in (0, 1). With no episodes the
+    interval is the whole range (0, 1).
+
+    Raises:
+        ConfigError: ``successes`` is not in [0, n] or ``confidence`` not in (0, 1).
+    """
+    from scipy.stats import binomtest
+
+    if not 0 <= successes <= n:
+        raise ConfigError(f"successes must be in [0, n={n}], got {successes}")
+    if not 0.0 < confidence < 1.0:
+        raise ConfigError(f"confidence must be in (0, 1), got {confidence}")
+    if n == 0:
+        return (0.0, 1.0)
+    ci = binomtest(int(successes), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return (float(ci.low), float(ci.high))
 
 
 def success_test(wins_a: int, n_a: int, wins_b: int, n_b: int) -> float | None:
@@ -71,18 +105,53 @@ def location_test(a: Sequence[float], b: Sequence[float]) -> float | None:
 
 
 def median_ci(values: Sequence[float], *, seed: int = 0) -> tuple[float | None, float | None, float | None]:
-    """(median, low, high): the median and its 95 % percentile-bootstrap interval."""
+    """(median, low, high): the median and its 95 % percentile-bootstrap interval (2000
+    resamples drawn from ``default_rng(seed)``), in the unit of ``values``; non-finite and None
+    values are left out."""
+    from scipy.stats import bootstrap
+
     x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if len(x) == 0:
         return None, None, None
     med = float(np.median(x))
-    if len(x) < 2 or np.all(x == x[0]):
+    if len(x) < 2 or np.all(x == x[0]):  # no spread: SciPy would warn and return nan
         return med, med, med
-    rng = np.random.default_rng(seed)
-    samples = rng.choice(x, size=(_BOOTSTRAP_RESAMPLES, len(x)), replace=True)
-    medians = np.median(samples, axis=1)
-    lo, hi = np.percentile(medians, [2.5, 97.5])
-    return med, float(lo), float(hi)
+    ci = bootstrap(
+        (x,),
+        np.median,
+        n_resamples=_BOOTSTRAP_RESAMPLES,
+        method="percentile",
+        vectorized=True,
+        rng=np.random.default_rng(seed),
+    ).confidence_interval
+    return med, float(ci.low), float(ci.high)
+
+
+def episodes_frame(rows: Sequence[dict[str, Any]] | Any) -> Any:
+    """``episodes.csv`` rows (dicts of strings or numbers, or a DataFrame) as a pandas DataFrame
+    with the numeric metric columns as floats (blank: NaN) and an ``arm`` column (the row's
+    ``arm``, else its ``controller``)."""
+    import pandas as pd
+
+    df = rows.copy() if isinstance(rows, pd.DataFrame) else pd.DataFrame(list(rows))
+    arm = df["arm"] if "arm" in df else pd.Series("", index=df.index)
+    df["arm"] = [
+        str(a) if isinstance(a, str) and a else str(c) for a, c in zip(arm, df["controller"], strict=True)
+    ]
+    for column in _NUMERIC:
+        if column in df:
+            df[column] = pd.to_numeric(df[column].replace("", np.nan), errors="coerce").astype(float)
+    return df
+
+
+# Metric columns of episodes.csv read as numbers.
+_NUMERIC = (
+    "clearance_m",
+    "peak_contact_force_n",
+    "time_to_insert_s",
+    "contact_to_seat_s",
+    "contact_impulse_ns",
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,72 +180,60 @@ class PairComparison:
         ]
 
 
-@dataclasses.dataclass
-class _Arm:
-    wins: int
-    n: int
-    forces: list[float]
-    times: list[float]
+def compare_arms(rows: Sequence[dict[str, Any]] | Any) -> list[PairComparison]:
+    """Every pair of arms (``arm`` or ``controller``, + ``planner``, of episodes.csv rows or
+    their :func:`episodes_frame`) at each clearance, largest clearance first."""
+    import pandas as pd
 
-
-def compare_arms(rows: Sequence[dict[str, object]]) -> list[PairComparison]:
-    """Every pair of arms (``controller`` + ``planner`` of episodes.csv rows) at each clearance."""
-    arms: dict[tuple[float, str], _Arm] = {}
-    for row in rows:
-        key = (float(str(row["clearance_m"])), _arm(row))
-        arm = arms.setdefault(key, _Arm(0, 0, [], []))
-        arm.n += 1
-        ok = row["status"] == "success"
-        arm.wins += ok
-        force = _number(row.get("peak_contact_force_n"))
-        if force is not None:
-            arm.forces.append(force)
-        # Time from the first contact to seated where the episode has it (held insertion: its
-        # start and approach take the same time in every arm), else the time to insert.
-        t = _number(row.get("contact_to_seat_s")) if row.get("task") == "held_insertion" else None
-        t = t if t is not None else _number(row.get("time_to_insert_s"))
-        if ok and t is not None:
-            arm.times.append(t)
+    df = episodes_frame(rows)
+    if df.empty:
+        return []
+    df["pair_arm"] = df["arm"] + "+" + df["planner"].astype(str)
+    df["won"] = df["status"] == "success"
+    # Time from the first contact to seated where the episode has it (held insertion: its
+    # start and approach take the same time in every arm), else the time to insert.
+    seat = df.get("contact_to_seat_s", pd.Series(np.nan, index=df.index))
+    held = df.get("task", pd.Series("", index=df.index)) == "held_insertion"
+    df["compared_time"] = df["time_to_insert_s"].where(~held | seat.isna(), seat)
     out = []
-    for clearance in sorted({c for c, _ in arms}, reverse=True):
-        names = [name for c, name in arms if c == clearance]
-        pairs = [
-            (a, b, arms[(clearance, a)], arms[(clearance, b)]) for a, b in itertools.combinations(names, 2)
-        ]
+    for clearance, at in sorted(df.groupby("clearance_m", sort=False), key=lambda g: -g[0]):
+        arms = {
+            name: (
+                int(g["won"].sum()),
+                len(g),
+                _finite(g["peak_contact_force_n"]),
+                _finite(g.loc[g["won"], "compared_time"]),
+            )
+            for name, g in at.groupby("pair_arm", sort=False)
+        }
+        pairs = [(a, b, arms[a], arms[b]) for a, b in itertools.combinations(arms, 2)]
         # One Holm family per metric and clearance.
-        p_success = holm([success_test(x.wins, x.n, y.wins, y.n) for _, _, x, y in pairs])
-        p_force = holm([location_test(x.forces, y.forces) for _, _, x, y in pairs])
-        p_time = holm([location_test(x.times, y.times) for _, _, x, y in pairs])
+        p_success = holm([success_test(x[0], x[1], y[0], y[1]) for _, _, x, y in pairs])
+        p_force = holm([location_test(x[2], y[2]) for _, _, x, y in pairs])
+        p_time = holm([location_test(x[3], y[3]) for _, _, x, y in pairs])
         for i, (a, b, x, y) in enumerate(pairs):
             out.append(
                 PairComparison(
-                    clearance_m=clearance,
-                    arm_a=a,
-                    arm_b=b,
-                    success_a=f"{x.wins}/{x.n}",
-                    success_b=f"{y.wins}/{y.n}",
+                    clearance_m=float(clearance),
+                    arm_a=str(a),
+                    arm_b=str(b),
+                    success_a=f"{x[0]}/{x[1]}",
+                    success_b=f"{y[0]}/{y[1]}",
                     p_success=p_success[i],
-                    force_median_a=_median(x.forces),
-                    force_median_b=_median(y.forces),
+                    force_median_a=_median(x[2]),
+                    force_median_b=_median(y[2]),
                     p_force=p_force[i],
-                    time_median_a=_median(x.times),
-                    time_median_b=_median(y.times),
+                    time_median_a=_median(x[3]),
+                    time_median_b=_median(y[3]),
                     p_time=p_time[i],
                 )
             )
     return out
 
 
+def _finite(values: Any) -> list[float]:
+    return [float(v) for v in values if math.isfinite(v)]
+
+
 def _median(values: list[float]) -> float | None:
     return float(np.median(values)) if values else None
-
-
-def _arm(row: dict[str, object]) -> str:
-    return f"{row.get('arm') or row['controller']}+{row['planner']}"
-
-
-def _number(value: object) -> float | None:
-    if value in (None, ""):
-        return None
-    x = float(str(value))
-    return x if math.isfinite(x) else None

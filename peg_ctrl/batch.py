@@ -35,7 +35,7 @@ def run_batch(
     desc: str = "episodes",
 ) -> list[dict[str, Any]]:
     """Run ``(EpisodeConfig, out_dir)`` jobs on ``workers`` processes; summaries in job order."""
-    from tqdm import tqdm
+    from peg_ctrl.progress import progress_bar
 
     # Configs travel as plain data and are validated again in the worker.
     items = [(to_dict(cfg), str(out), plot) for cfg, out in jobs]
@@ -45,7 +45,7 @@ def run_batch(
     with futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         pending = {pool.submit(_worker, item): i for i, item in enumerate(items)}
         successes = 0
-        with tqdm(total=len(items), desc=desc, disable=not progress, unit="ep") as bar:
+        with progress_bar(total=len(items), desc=desc, unit="ep", enabled=progress) as bar:
             for fut in futures.as_completed(pending):
                 i = pending[fut]
                 results[i] = fut.result()

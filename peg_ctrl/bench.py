@@ -27,6 +27,7 @@ import platform
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -96,8 +97,10 @@ def bench_episode(
     seed: int = 0,
     repeats: int = 5,
     control_dt: float | None = None,
+    on_repeat: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
-    """One whole episode of ``task`` with ``controller`` in the loop vs its raw replay."""
+    """One whole episode of ``task`` with ``controller`` in the loop vs its raw replay;
+    ``on_repeat`` is called after each repetition (for a progress bar)."""
     from peg_ctrl.episode import build_loop
 
     cfg = _episode_config(controller, task, profile, seed, control_dt)
@@ -147,6 +150,8 @@ def bench_episode(
             logger.close()
             sections.append({name: sec / timed_steps * 1e6 for name, sec in loop.timer.seconds.items()})
             loop.timer = None
+            if on_repeat is not None:
+                on_repeat()
     outcome = loop.last
     k = loop.decimation
     # per physics step: each repetition's own step count
@@ -224,23 +229,31 @@ _CONTACT_SITUATIONS = {
 
 
 def bench_profiles(
-    profiles: tuple[str, ...] = ("seed", "precision"), *, n_steps: int = 400, repeats: int = 5
+    profiles: tuple[str, ...] = ("seed", "precision"),
+    *,
+    n_steps: int = 400,
+    repeats: int = 5,
+    progress: bool = True,
 ) -> dict[str, Any]:
     """Cost of a physics step per profile in contact: each profile's held push is run into each
     situation of ``_CONTACT_SITUATIONS``; ``n_steps`` steps from the final state (same controls)
-    are then timed, profiles alternating within every repetition, medians taken."""
+    are then timed, profiles alternating within every repetition, medians taken. A progress bar
+    follows the held pushes (see :mod:`peg_ctrl.progress`) when ``progress``."""
     import dataclasses
+    import itertools
 
+    from peg_ctrl.progress import progress as with_bar
     from peg_ctrl.validity import PushCase, held_push
 
     states: dict[tuple[str, str], tuple[mujoco.MjModel, mujoco.MjData]] = {}
-    for name in profiles:  # held_push rejects an unknown profile name before any work
-        for situation, fields in _CONTACT_SITUATIONS.items():
+    pushes = list(itertools.product(profiles, _CONTACT_SITUATIONS.items()))
+    # held_push rejects an unknown profile name before any work
+    for name, (situation, fields) in with_bar(pushes, desc="held pushes", unit="push", enabled=progress):
 
-            def keep(m: mujoco.MjModel, d: mujoco.MjData, key: tuple[str, str] = (name, situation)) -> None:
-                states[key] = (m, copy.copy(d))
+        def keep(m: mujoco.MjModel, d: mujoco.MjData, key: tuple[str, str] = (name, situation)) -> None:
+            states[key] = (m, copy.copy(d))
 
-            held_push(dataclasses.replace(PushCase(duration=1.0), **fields), name, on_finish=keep)
+        held_push(dataclasses.replace(PushCase(duration=1.0), **fields), name, on_finish=keep)
     times: dict[tuple[str, str], list[float]] = {key: [] for key in states}
     for _ in range(repeats):
         for key, (model, start) in states.items():
@@ -287,16 +300,23 @@ def run_benchmarks(
     throughput: bool = True,
     throughput_episodes: int = 20,
     physics: bool = False,
+    progress: bool = True,
 ) -> dict[str, Any]:
-    """Run the benchmarks and write JSON to ``out``."""
+    """Run the benchmarks and write JSON to ``out``; a progress bar counts the repetitions of
+    every task x controller x control period (see :mod:`peg_ctrl.progress`) when ``progress``."""
     from peg_ctrl.io import atomic_write_text
+    from peg_ctrl.progress import progress_bar
 
-    entries = [
-        bench_episode(c, task=t, profile=profile, repeats=repeats, control_dt=dt)
-        for t in tasks
-        for c in controllers
-        for dt in control_dts or [None]
-    ]
+    cases = [(t, c, dt) for t in tasks for c in controllers for dt in control_dts or [None]]
+    entries = []
+    with progress_bar(total=len(cases) * repeats, desc="bench", unit="rep", enabled=progress) as bar:
+        for t, c, dt in cases:
+            bar.set_postfix_str(f"{c} / {t}")
+            entries.append(
+                bench_episode(
+                    c, task=t, profile=profile, repeats=repeats, control_dt=dt, on_repeat=bar.update
+                )
+            )
     results = {
         "machine": {
             "python": platform.python_version(),
@@ -308,7 +328,7 @@ def run_benchmarks(
         "target": f"overhead median <= {TARGET_OVERHEAD:.2f}",
         "episodes": entries,
         "throughput": bench_throughput(episodes=throughput_episodes) if throughput else [],
-        "physics_profiles": bench_profiles(repeats=repeats) if physics else None,
+        "physics_profiles": bench_profiles(repeats=repeats, progress=progress) if physics else None,
     }
     atomic_write_text(out, json.dumps(results, indent=2) + "\n")
     return results

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -34,6 +34,7 @@ from peg_ctrl.errors import (
     UnknownComponent,
 )
 from peg_ctrl.io import atomic_write_text, prepare_output_dir, prepare_output_file
+from peg_ctrl.progress import ENV_VAR
 
 __all__ = ["main"]
 
@@ -64,7 +65,55 @@ class _Parser(argparse.ArgumentParser):
     """Argument errors in one line (``peg-sim: error: ...``), exit code 2; ``--help`` for usage."""
 
     def error(self, message: str) -> NoReturn:
+        """Print ``message`` as one ``peg-sim: error:`` line and exit with code 2."""
         self.exit(2, f"peg-sim: error: {message} (see '{self.prog} --help')\n")
+
+
+class _Known:
+    """The names in one of the package's registries, for an option's ``choices`` (listed in its
+    help as ``%(choices)s``) and ``type`` (an unknown name is refused with the known ones).
+
+    The registry is imported on first use, not when the parser is built: ``peg-sim --help``
+    stays fast, and :func:`main` picks the GL backend before anything imports mujoco.
+    """
+
+    def __init__(self, kind: str, module: str, attr: str) -> None:
+        self.kind = kind
+        self.module = module
+        self.attr = attr
+
+    def names(self) -> list[str]:
+        """The registered names, sorted."""
+        from importlib import import_module
+
+        return sorted(getattr(import_module(self.module), self.attr))
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names())
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names()
+
+    def __call__(self, value: str) -> str:
+        if value not in self:
+            raise argparse.ArgumentTypeError(str(UnknownComponent(self.kind, value, self.names())))
+        return value
+
+
+CONTROLLERS = _Known("controller", "peg_ctrl.controllers", "REGISTRY")
+PLANNERS = _Known("planner", "peg_ctrl.planners", "PLANNERS")
+PROFILES = _Known("physics profile", "peg_ctrl.physics", "PROFILES")
+BENCH_TASKS = _Known("task", "peg_ctrl.bench", "BENCH_TASKS")
+
+
+def _version() -> str:
+    """The installed distribution's version, or ``unknown`` when it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("peg-ctrl")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def _episode_mapping(args: argparse.Namespace) -> dict[str, Any]:
@@ -91,14 +140,19 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
     if args.samples < 4:
         raise ConfigError(f"--samples must be >= 4, got {args.samples}")
-    target = args.out or jaw.source_tree_path()
-    if target is None:
-        raise ConfigError(
-            "--out is required: this is an installed copy, whose packaged calibration is read-only "
-            "(peg-sim calibrate --out jaw.json)"
-        )
+    if args.replace_packaged:
+        target = jaw.source_tree_path()
+        if target is None:
+            raise ConfigError(
+                "--replace-packaged works only in a source checkout: this installed copy's packaged "
+                "calibration is read-only; use --out FILE"
+            )
+    else:
+        target = Path(args.out)
     out = prepare_output_file(target)
-    cal = jaw.calibrate(build_model(), n_samples=args.samples, n_knots=max(2, args.samples // 2 + 1))
+    cal = jaw.calibrate(
+        build_model(), n_samples=args.samples, n_knots=max(2, args.samples // 2 + 1), progress=True
+    )
     atomic_write_text(out, cal.to_json() + "\n")
     print(
         f"jaw calibration: {len(cal.bytes_)} knots, open {cal.sep_open_m * 1e3:.2f} mm, "
@@ -106,13 +160,6 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         f"-> {out}"
     )
     return 0
-
-
-def _check_controller(name: str) -> None:
-    from peg_ctrl.controllers import REGISTRY
-
-    if name not in REGISTRY:
-        raise UnknownComponent("controller", name, REGISTRY)
 
 
 def _print_profiles(result: dict[str, Any]) -> None:
@@ -127,16 +174,10 @@ def _print_profiles(result: dict[str, Any]) -> None:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from peg_ctrl.bench import BENCH_TASKS, run_benchmarks
     from peg_ctrl.controllers import REGISTRY
-    from peg_ctrl.physics import profile
 
+    # Controller, task and profile names were checked by the parser (CONTROLLERS, ...).
     names = args.controller or sorted(REGISTRY)
-    for name in names:
-        _check_controller(name)
     tasks = args.task or list(BENCH_TASKS)
-    for task in tasks:
-        if task not in BENCH_TASKS:
-            raise ConfigError(f"--task must be one of {', '.join(BENCH_TASKS)}, got {task!r}")
-    profile(args.profile, where="--profile")
     if args.repeats < 1:
         raise ConfigError(f"--repeats must be >= 1, got {args.repeats}")
     if args.throughput_episodes < 0:
@@ -230,6 +271,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.max_steps is not None:
         data["max_steps"] = args.max_steps
     cfg = episode_config_from_mapping(data)
+    if args.seed is not None and not cfg.seeded:
+        # Refused rather than ignored: a loop over --seed would silently run one episode N times.
+        raise ConfigError(
+            "--seed has no effect here: the start pose is drawn only with --randomize (or "
+            "randomization.enabled in the config) and the config's domain has no ranges or noise; "
+            "add --randomize"
+        )
     out = prepare_output_dir(args.out)
     if args.viewer:
         result = _run_with_viewer(cfg, out)
@@ -276,16 +324,22 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
     lo, hi = SPEED_RANGE
     if not lo <= args.speed <= hi:
         raise ConfigError(f"--speed must be in [{lo}, {hi}], got {args.speed}")
-    if args.seed < 0:
+    if args.seed is not None and args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
+    if args.seed is not None and not args.randomize:
+        raise ConfigError("--seed only changes the peg's start pose with --randomize; add --randomize")
     if not args.scripted and not os.environ.get("DISPLAY"):
         raise ConfigError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
-    _check_controller(args.controller)
     out = prepare_output_dir(args.out)
-    session = TeleopSession(out, controller=args.controller, seed=args.seed, randomize=args.randomize)
+    seed = args.seed if args.seed is not None else 0
+    session = TeleopSession(out, controller=args.controller, seed=seed, randomize=args.randomize)
     session.mapper.set_speed(args.speed)
     if args.scripted:
-        ScriptedOperator(session, SCRIPTED_INSERTION).run(max_sim_s=120.0)
+        try:
+            ScriptedOperator(session, SCRIPTED_INSERTION).run(max_sim_s=120.0)
+        except KeyboardInterrupt:
+            session.finish("interrupted")  # keep the records so far; main() exits with 130
+            raise
         summary = session.finish("script_done")
     else:
         from peg_ctrl.teleop_window import WindowUnavailable, run_window
@@ -366,12 +420,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_validity(args: argparse.Namespace) -> int:
-    from peg_ctrl.physics import profile
     from peg_ctrl.validity_report import run_battery
 
-    profiles = args.profile or ["seed", "precision"]
-    for name in profiles:
-        profile(name, where="--profile")
+    profiles = args.profile or ["seed", "precision"]  # names checked by the parser (PROFILES)
     if args.trials < 1:
         raise ConfigError(f"--trials must be >= 1, got {args.trials}")
     if args.seed < 0:
@@ -382,11 +433,8 @@ def _cmd_validity(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate_profile(args: argparse.Namespace) -> int:
-    from peg_ctrl.physics import profile
     from peg_ctrl.profile_check import validate_profile
 
-    profile(args.profile, where="profile")
-    profile(args.reference, where="--reference")
     if args.profile == args.reference:
         raise ConfigError(f"--reference must differ from the profile, got {args.reference!r} for both")
     if args.seeds < 2:
@@ -400,6 +448,14 @@ def _cmd_validate_profile(args: argparse.Namespace) -> int:
     print((out / "validation.md").read_text(), end="")
     print(f"wrote {out / 'validation.json'} and {out / 'validation.md'}")
     return 0 if result["passed"] else 1
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from peg_ctrl.replay import replay
+
+    out = replay(args.run_dir, video=args.video, viewer=args.viewer, speed=args.speed)
+    print(f"wrote {out}" if out is not None else "replay ended")
+    return 0
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
@@ -423,30 +479,84 @@ def _add_set(p: argparse.ArgumentParser, what: str = "config") -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="peg-sim", description="Peg-in-hole simulation and controller research in MuJoCo.")
+    """The ``peg-sim`` parser: one subcommand per command, each with a help line and a description."""
+    parser = _Parser(
+        prog="peg-sim",
+        description="Peg-in-hole simulation and controller research in MuJoCo. "
+        "'peg-sim COMMAND --help' describes a command.",
+        epilog=f"Progress bars go to stderr when it is a terminal; {ENV_VAR}=0 hides them, "
+        f"{ENV_VAR}=1 shows them anyway.",
+    )
+    parser.add_argument("--version", action="version", version=f"peg-sim {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("model", help="write the compiled scene as scene.xml plus meshes")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--config", help="episode config file (.yaml, .toml or .json) whose scene to write")
+    p = sub.add_parser(
+        "model",
+        help="write the compiled scene (scene.xml + meshes)",
+        description="Write the compiled scene as DIR/scene.xml plus its meshes "
+        "(open it with: python -m mujoco.viewer --mjcf=DIR/scene.xml).",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument(
+        "--config", metavar="FILE", help="episode config file (.yaml, .toml or .json) whose scene to write"
+    )
     _add_set(p)
     p.set_defaults(func=_cmd_model)
 
-    p = sub.add_parser("calibrate", help="measure the jaw byte <-> pad separation map and save it")
-    p.add_argument("--out", help="output JSON (default: the packaged calibration)")
+    p = sub.add_parser(
+        "calibrate",
+        help="measure the jaw byte <-> pad separation table",
+        description="Sweep the jaw actuator's byte over 0..255 on the model, fit the piecewise-linear "
+        "byte <-> pad separation map and write it as JSON to --out FILE. --replace-packaged instead "
+        "rewrites the table the package ships (peg_ctrl/data/jaw_calibration.json; source checkouts "
+        "only).",
+    )
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", metavar="FILE", help="output JSON file")
+    where.add_argument(
+        "--replace-packaged",
+        action="store_true",
+        help="rewrite the packaged calibration in this source checkout (refused in an installed copy)",
+    )
     p.add_argument("--samples", type=int, default=103, help="bytes swept over 0..255 (default 103)")
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser(
         "bench",
-        help="loop overhead over raw physics per controller, by component, and sweep throughput (JSON)",
+        help="time the loop against raw physics (JSON)",
+        description="Loop overhead over raw physics per controller, by component, and sweep "
+        "throughput, written as JSON to --out. --physics or --sweep run another benchmark instead.",
     )
     p.add_argument(
-        "--out", default="bench.json", help="output JSON file (default: bench.json in the current directory)"
+        "--out",
+        default="bench.json",
+        metavar="FILE",
+        help="output JSON file (default: bench.json in the current directory)",
     )
-    p.add_argument("--controller", action="append", help="controller to bench (repeatable; default all)")
-    p.add_argument("--task", action="append", help="task: default or contact (repeatable; default both)")
-    p.add_argument("--profile", default="seed", help="physics profile of the episodes (default seed)")
+    p.add_argument(
+        "--controller",
+        action="append",
+        type=CONTROLLERS,
+        choices=CONTROLLERS,
+        metavar="NAME",
+        help="controller to bench: %(choices)s (repeatable; default all)",
+    )
+    p.add_argument(
+        "--task",
+        action="append",
+        type=BENCH_TASKS,
+        choices=BENCH_TASKS,
+        metavar="TASK",
+        help="task: %(choices)s (repeatable; default both)",
+    )
+    p.add_argument(
+        "--profile",
+        default="seed",
+        type=PROFILES,
+        choices=PROFILES,
+        metavar="PROFILE",
+        help="physics profile of the episodes: %(choices)s (default %(default)s)",
+    )
     p.add_argument("--repeats", type=int, default=3, help="interleaved repetitions (default 3)")
     p.add_argument(
         "--control-dt",
@@ -471,48 +581,83 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "run",
-        help="run one autonomous episode headless: summary, logs, force plot (and video)",
+        help="run one autonomous episode headless",
         description="Run one autonomous episode (grasp, lift, turn, align, release, settle) and write "
         "DIR/summary.json, DIR/log.jsonl, DIR/forces.npz, DIR/force_profile.png (and DIR/episode.mp4). "
         "Exit code 0 on success, 1 on a failed episode, 2 on bad input.",
     )
-    p.add_argument("--controller", help="controller name (default pd, or the config file's)")
-    p.add_argument("--planner", help="ruckig (default) or fixed_speed")
-    p.add_argument("--seed", type=int, help="random seed for the initial conditions (default 0)")
+    p.add_argument(
+        "--controller",
+        type=CONTROLLERS,
+        choices=CONTROLLERS,
+        metavar="NAME",
+        help="controller: %(choices)s (default pd, or the config file's)",
+    )
+    p.add_argument(
+        "--planner",
+        type=PLANNERS,
+        choices=PLANNERS,
+        metavar="NAME",
+        help="planner: %(choices)s (default ruckig, or the config file's)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        help="random seed (default 0) of the start pose (with --randomize), the domain draw and "
+        "sensor noise; refused when the episode would not depend on it",
+    )
     p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose from the seed")
     p.add_argument(
         "--max-steps",
         type=int,
         help="physics step limit (default: 20 s of simulated time, 20000 steps in the seed profile)",
     )
-    p.add_argument("--out", default="runs/episode", help="output directory (default runs/episode)")
+    p.add_argument(
+        "--out", default="runs/episode", metavar="DIR", help="output directory (default %(default)s)"
+    )
     p.add_argument("--video", action="store_true", help="also render DIR/episode.mp4 offscreen")
     p.add_argument("--viewer", action="store_true", help="show the episode in the MuJoCo viewer instead")
-    p.add_argument("--config", help="episode config file (.yaml, .toml or .json)")
+    p.add_argument("--config", metavar="FILE", help="episode config file (.yaml, .toml or .json)")
     _add_set(p)
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser(
         "teleop",
-        help="drive the gripper from the keyboard in a window (or --scripted, headless)",
-        description="Teleoperation. Keys: 4/5 +Y/-Y, 6/7 +X/-X, 8/9 +Z/-Z, Q/E roll, Up/Down pitch, "
+        help="drive the gripper from the keyboard",
+        description="Teleoperation in a window (--scripted: a scripted insertion, headless). Writes "
+        "DIR/summary.json (the fields of 'peg-sim run' plus attempts and end), DIR/log.jsonl and "
+        "DIR/forces.npz. Keys: 4/5 +Y/-Y, 6/7 +X/-X, 8/9 +Z/-Z, Q/E roll, Up/Down pitch, "
         "Left/Right yaw, [ / ] jaw open/close, Shift fine motion, J/K/L speed 0.5x/1x/2x, -/= speed "
         "down/up, Z reset, Esc quit. Mouse: left-drag rotate, right-drag move, scroll zoom.",
     )
-    p.add_argument("--controller", default="pd", help="controller name (default pd)")
-    p.add_argument("--seed", type=int, default=0, help="random seed for the peg's start pose")
+    p.add_argument(
+        "--controller",
+        default="pd",
+        type=CONTROLLERS,
+        choices=CONTROLLERS,
+        metavar="NAME",
+        help="controller: %(choices)s (default %(default)s)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        help="random seed of the peg's start pose (default 0; only with --randomize)",
+    )
     p.add_argument("--randomize", action="store_true", help="randomise the peg's start pose (and on reset)")
     p.add_argument("--speed", type=float, default=1.0, help="initial speed multiplier, 0.1 to 5 (default 1)")
-    p.add_argument("--out", default="runs/teleop", help="output directory (default runs/teleop)")
+    p.add_argument(
+        "--out", default="runs/teleop", metavar="DIR", help="output directory (default %(default)s)"
+    )
     p.add_argument("--screenshot", help="save the last frame (with overlay) to this PNG on exit")
     p.add_argument("--scripted", action="store_true", help="run a scripted insertion headless (no window)")
     p.set_defaults(func=_cmd_teleop)
 
     p = sub.add_parser(
         "sweep",
-        help="run an experiment file (controllers x planners x clearances x seeds) in parallel",
-        description="Run or resume an experiment; writes DIR/episodes.csv, .parquet, summary.csv, "
-        "report.md and plots. Rerunning the same command skips finished episodes.",
+        help="run an experiment (a grid of episodes) in parallel",
+        description="Run or resume an experiment (controllers x planners x clearances x seeds); writes "
+        "DIR/episodes.csv, .parquet, summary.csv, report.md and plots. Rerunning the same command "
+        "skips finished episodes.",
     )
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument(
@@ -521,7 +666,7 @@ def _parser() -> argparse.ArgumentParser:
         help="experiment file (.yaml, .toml or .json), or the name of a shipped one (e.g. quick)",
     )
     what.add_argument("--list", action="store_true", help="list the shipped experiments and exit")
-    p.add_argument("--out", help="output directory (default runs/<experiment name>)")
+    p.add_argument("--out", metavar="DIR", help="output directory (default runs/<experiment name>)")
     p.add_argument("--workers", type=int, help="worker processes (default: one per core)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--address", help="Ray cluster address (with --backend ray)")
@@ -530,40 +675,92 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "validity",
-        help="physical validity battery per physics profile: held pushes vs clearance, chamfer, tilt",
+        help="physical validity battery per physics profile",
+        description="Held pushes per physics profile against clearance, chamfer and tilt; writes "
+        "DIR/validity.md, DIR/validity.json and plots.",
     )
     p.add_argument(
-        "--profile", action="append", help="physics profile (repeatable; default seed and precision)"
+        "--profile",
+        action="append",
+        type=PROFILES,
+        choices=PROFILES,
+        metavar="PROFILE",
+        help="physics profile: %(choices)s (repeatable; default seed and precision)",
     )
     p.add_argument("--trials", type=int, default=10, help="pushes per clearance (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start-error draws (default 0)")
-    p.add_argument("--out", default="runs/validity", help="output directory (default runs/validity)")
+    p.add_argument(
+        "--out", default="runs/validity", metavar="DIR", help="output directory (default %(default)s)"
+    )
     p.set_defaults(func=_cmd_validity)
 
     p = sub.add_parser(
         "validate-profile",
-        help="a physics profile against a reference on both tasks: success, peak force, slip, speed "
-        "(exit 1 if a check fails)",
+        help="check a physics profile against a reference",
+        description="Run both tasks for --seeds seeds in PROFILE and in --reference and compare success, "
+        "peak force, slip and speed; writes DIR/validation.json and DIR/validation.md. Exit code 1 if "
+        "a check fails.",
     )
-    p.add_argument("profile", help="the profile to validate (e.g. fast)")
-    p.add_argument("--reference", default="seed", help="the reference profile (default seed)")
+    p.add_argument(
+        "profile",
+        type=PROFILES,
+        choices=PROFILES,
+        metavar="PROFILE",
+        help="the profile to validate: %(choices)s",
+    )
+    p.add_argument(
+        "--reference",
+        default="seed",
+        type=PROFILES,
+        choices=PROFILES,
+        metavar="PROFILE",
+        help="the reference profile (default %(default)s)",
+    )
     p.add_argument("--seeds", type=int, default=100, help="seeds per task and profile (default 100)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
-    p.add_argument("--out", help="output directory (default runs/validate-<profile>)")
+    p.add_argument("--out", metavar="DIR", help="output directory (default runs/validate-<profile>)")
     p.set_defaults(func=_cmd_validate_profile)
 
-    p = sub.add_parser("plot", help="redraw the plots and report.md of a sweep from its saved results")
-    p.add_argument("dir", help="a sweep's output directory")
+    p = sub.add_parser(
+        "replay",
+        help="replay a logged episode to a video, or in the viewer",
+        description="Replay the episode recorded in RUN_DIR (its config.json and states.npz, written by "
+        "peg-sim run): kinematically, from the recorded states. Writes RUN_DIR/replay.mp4 (or --video), "
+        "or shows it in the MuJoCo viewer with --viewer (needs a display).",
+    )
+    p.add_argument("run_dir", metavar="RUN_DIR", help="an episode's output directory (peg-sim run --out)")
+    p.add_argument("--video", metavar="OUT.mp4", help="the video to write (default RUN_DIR/replay.mp4)")
+    p.add_argument("--viewer", action="store_true", help="show the replay in the MuJoCo viewer instead")
+    p.add_argument(
+        "--speed", type=float, default=1.0, help="simulated seconds per second of replay (default 1)"
+    )
+    p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser(
+        "plot",
+        help="redraw a sweep's plots and report.md",
+        description="Redraw the plots and report.md of a sweep from the episodes.csv it saved in DIR.",
+    )
+    p.add_argument("dir", metavar="DIR", help="a sweep's output directory")
     p.set_defaults(func=_cmd_plot)
     return parser
 
 
+def _choose_gl_backend() -> None:
+    """Offscreen rendering (``run --video``) on Linux without a window system: EGL.
+
+    Set before parsing: mujoco reads ``MUJOCO_GL`` once, on import, and the parser's registry
+    checks (:class:`_Known`) may import it. Only on Linux, the one platform where EGL is valid.
+    """
+    if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+        os.environ.setdefault("MUJOCO_GL", "egl")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``peg-sim`` with ``argv`` (default: the process's arguments); returns the exit code."""
+    _choose_gl_backend()
     parser = _parser()
     args = parser.parse_args(argv)
-    if not os.environ.get("DISPLAY") and not getattr(args, "viewer", False):
-        # Offscreen rendering without a window system; must be set before mujoco is imported.
-        os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         return int(args.func(args))
     except KeyboardInterrupt:

@@ -3,8 +3,8 @@
 The driver compiles the scene (cached per process), applies the per-seed domain draw, builds the
 controller, the task (``task.name``: pick-and-place by default, or held insertion), the monitors
 and the recorders, runs :class:`~peg_ctrl.loop.Loop`
-and writes ``summary.json``, ``config.json``, ``log.jsonl``, ``forces.npz`` (and the force plot
-and video) into the output directory. Success and failure are the task's and the monitors'
+and writes ``summary.json``, ``config.json``, ``log.jsonl``, ``forces.npz``, ``states.npz`` (and
+the force plot and video) into the output directory. Success and failure are the task's and the monitors'
 (see :mod:`peg_ctrl.tasks.pick_and_place`, :mod:`peg_ctrl.tasks.held_insertion` and
 :mod:`peg_ctrl.monitors`).
 
@@ -38,7 +38,13 @@ from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
 from peg_ctrl.monitors import ContactMonitor, GraspMonitor
 from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
-from peg_ctrl.recorders import CallbackRecorder, StepLogRecorder, TraceRecorder, VideoRecorder
+from peg_ctrl.recorders import (
+    CallbackRecorder,
+    StateRecorder,
+    StepLogRecorder,
+    TraceRecorder,
+    VideoRecorder,
+)
 from peg_ctrl.scene import SceneConfig, build_model
 from peg_ctrl.tasks.base import TaskContext, TaskSpec
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
@@ -86,7 +92,14 @@ class DomainConfig:
 
     @property
     def noisy(self) -> bool:
+        """Whether any sensor noise is on."""
         return self.position_noise > 0 or self.velocity_noise > 0 or self.force_noise > 0
+
+    @property
+    def random(self) -> bool:
+        """Whether the seed changes anything here: a range wider than a point, or sensor noise."""
+        ranges = (self.peg_mass_scale, self.friction_scale, self.gain_scale)
+        return self.noisy or any(lo < hi for lo, hi in ranges)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,6 +141,12 @@ class EpisodeConfig:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.seed < 0:
             raise ConfigError(f"seed must be >= 0, got {self.seed}")
+
+    @property
+    def seeded(self) -> bool:
+        """Whether ``seed`` changes the episode: the task draws its start from it (pick and place
+        only with ``randomization.enabled``, held insertion always), or the domain is random."""
+        return self.task.draws_from_seed(self.randomization) or self.domain.random
 
     def step_limit(self, timestep: float) -> int:
         """Physics steps the episode may take: ``max_steps``, else :data:`EPISODE_TIME` worth."""
@@ -282,7 +301,8 @@ def run_episode(
     plot: bool = True,
     on_step: Callable[[mujoco.MjModel, mujoco.MjData], None] | None = None,
 ) -> EpisodeResult:
-    """Run one episode headless, writing ``summary.json``, ``config.json``, logs, plot (and video).
+    """Run one episode headless, writing ``summary.json``, ``config.json``, logs, ``states.npz``
+    (for :mod:`peg_ctrl.replay`), plot (and video).
 
     ``on_step`` (e.g. a viewer sync) is called after every control step. Ctrl-C writes the
     results so far (status ``interrupted``) and re-raises :class:`KeyboardInterrupt`.
@@ -293,7 +313,8 @@ def run_episode(
     logger = EpisodeLogger(out_dir)
     loop = build_loop(cfg)
     steps_log = StepLogRecorder(logger, cfg.log.interval)
-    recorders: list[Recorder] = [steps_log]
+    states = StateRecorder(out_dir / "states.npz", loop.model.nq)
+    recorders: list[Recorder] = [steps_log, states]
     trace = TraceRecorder(logger, loop.task.phases) if cfg.log.trace else None
     if trace is not None:
         recorders.insert(0, trace)
@@ -304,12 +325,14 @@ def run_episode(
         recorders.append(CallbackRecorder(on_step))
     loop.recorders = recorders
     loop.reset(np.random.default_rng(cfg.seed))
+    states.start(loop.data)
     wall0 = time.perf_counter()
     outcome = loop.run(cfg.step_limit(loop.model.opt.timestep))
     wall = time.perf_counter() - wall0
     steps_log.flush(loop)
     if trace is not None:
         trace.flush()
+    states.close()
     result = _result(cfg, loop, outcome, wall, logger)
     logger.close({"event": "end", **result.to_dict()})
     if camera is not None:

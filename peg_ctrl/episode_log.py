@@ -8,8 +8,9 @@ crash or Ctrl-C leaves readable files up to the last flush:
   with the SPEC §7 fields, ``{"event": "phase", ...}`` when a phase ends, ``{"event": "end", ...}``
   with the episode record;
 - ``forces.npz`` — the full-rate force trace (:data:`TRACE_COLUMNS`): time, phase, the net
-  contact force of every body-group pair, the peg's deepest penetration and its depth, at every
-  physics step. While the episode runs the rows are appended, in chunks, to ``forces.partial``
+  contact force of every body-group pair, the peg's deepest penetration and its depth, and the
+  grip (the finger pads' squeeze on the peg, ``grip_force_n``), at every physics step. While
+  the episode runs the rows are appended, in chunks, to ``forces.partial``
   (raw little-endian float64, :data:`TRACE_COLUMNS` per row), which :func:`read_trace` reads
   too; it is replaced by ``forces.npz`` when the episode ends.
 """
@@ -29,7 +30,14 @@ from peg_ctrl.state import PAIRS
 
 __all__ = ["EpisodeLogger", "TRACE_COLUMNS", "read_log", "read_trace", "STEP_FIELDS"]
 
-TRACE_COLUMNS = ("t", "phase", *("-".join(p) for p in PAIRS), "peg_penetration_m", "peg_depth_m")
+TRACE_COLUMNS = (
+    "t",
+    "phase",
+    *("-".join(p) for p in PAIRS),
+    "peg_penetration_m",
+    "peg_depth_m",
+    "grip_force_n",
+)
 
 # Required fields of a step record (dotted paths), SPEC §7.
 STEP_FIELDS = (

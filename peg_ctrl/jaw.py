@@ -2,7 +2,7 @@
 
 The 2F-85's four-bar linkage makes the map mildly nonlinear, so it is measured on the model
 itself (:func:`measure`) and stored as a piecewise-linear table in
-``peg_ctrl/data/jaw_calibration.json`` (regenerate with ``peg-sim calibrate``).
+``peg_ctrl/data/jaw_calibration.json`` (regenerate with ``peg-sim calibrate --replace-packaged``).
 """
 
 from __future__ import annotations
@@ -88,8 +88,9 @@ def load_default() -> JawCalibration:
 
 
 def source_tree_path() -> Path | None:
-    """The shipped table's file in a source checkout (where ``peg-sim calibrate`` regenerates it),
-    or ``None`` in an installed copy, whose package files must not be rewritten."""
+    """The shipped table's file in a source checkout (where ``peg-sim calibrate
+    --replace-packaged`` regenerates it), or ``None`` in an installed copy, whose package files
+    must not be rewritten."""
     package = Path(__file__).resolve().parent
     if not (package.parent / "pyproject.toml").is_file():
         return None
@@ -103,16 +104,20 @@ def measure(
     settle_s: float = 1.0,
     sep_of: Callable[[mujoco.MjData], float],
     jaw_actuator: int,
+    progress: bool = False,
 ) -> NDArray[np.float64]:
     """Steady-state pad separation [m] for each byte, gravity off so the base stays put.
 
-    Each point starts from the ``home`` keyframe and settles for ``settle_s`` [s].
+    Each point starts from the ``home`` keyframe and settles for ``settle_s`` [s]. With
+    ``progress``, a bar counts the bytes (see :mod:`peg_ctrl.progress`).
     """
+    from peg_ctrl.progress import progress as with_bar
+
     model = _copy_without_gravity(model)
     data = mujoco.MjData(model)
     out = np.empty(len(bytes_))
     steps = int(round(settle_s / model.opt.timestep))
-    for i, b in enumerate(bytes_):
+    for i, b in enumerate(with_bar(bytes_, desc="calibrate", unit="byte", enabled=progress)):
         mujoco.mj_resetDataKeyframe(model, data, 0)
         data.ctrl[:] = 0.0
         data.ctrl[jaw_actuator] = b
@@ -145,12 +150,21 @@ def fit(bytes_: NDArray[np.float64], sep_m: NDArray[np.float64], *, n_knots: int
     return JawCalibration(knots_b, knots_s, err)
 
 
-def calibrate(model: mujoco.MjModel, *, n_samples: int = 103, n_knots: int = 52) -> JawCalibration:
-    """Sweep the jaw byte over [0, 255] on ``model`` and fit the piecewise-linear map."""
+def calibrate(
+    model: mujoco.MjModel, *, n_samples: int = 103, n_knots: int = 52, progress: bool = False
+) -> JawCalibration:
+    """Sweep the jaw byte over [0, 255] on ``model`` and fit the piecewise-linear map (with a
+    progress bar over the sweep if ``progress``)."""
     from peg_ctrl.scene import JAW_ACTUATOR
     from peg_ctrl.state import StateReader
 
     reader = StateReader(model)
     bytes_ = np.linspace(0.0, BYTE_MAX, n_samples)
-    sep = measure(model, bytes_=bytes_, sep_of=reader.jaw_sep_m, jaw_actuator=model.actuator(JAW_ACTUATOR).id)
+    sep = measure(
+        model,
+        bytes_=bytes_,
+        sep_of=reader.jaw_sep_m,
+        jaw_actuator=model.actuator(JAW_ACTUATOR).id,
+        progress=progress,
+    )
     return fit(bytes_, sep, n_knots=n_knots)

@@ -1,4 +1,17 @@
-"""Plots of an episode: contact force per body-group pair against time, phases shaded."""
+"""Plots of an episode: its contact forces against time, in stacked panels, phases shaded.
+
+:func:`plot_force_profile` draws, sharing one time axis:
+
+- a strip naming the task's phases (a name is shortened, or left out, where its span is too
+  narrow to hold it);
+- the grasp, on its own scale: the grip (the finger pads' squeeze on the peg) and the net
+  gripper-peg contact force, the load the grasp carries (a fraction of a newton while the peg is
+  carried, next to tens of newtons in the hole);
+- the insertion: the peg-block contact force;
+- every other contact pair that carried a force (the peg on the table, the fingers on the block
+  or the table), if any did;
+- the height of the peg's lower end above the hole's mouth (negative: below it).
+"""
 
 from __future__ import annotations
 
@@ -8,27 +21,38 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_force_profile"]
+__all__ = ["plot_force_profile", "PHASE_COLOURS"]
 
-_PHASE_COLOURS = {
-    "approach": "#f2f2f2",
-    "descend": "#e6eef7",
-    "grasp": "#e8f4e8",
-    "lift": "#fff6e0",
-    "rotate": "#f6e8f4",
-    "align": "#e7f6f6",
-    "insert": "#fbe9e7",
-    "release": "#eeeeee",
-    "settle": "#f7f7e8",
-    "push": "#fbe9e7",  # held insertion
-    "search": "#eef7e0",
-    "slide": "#eef7e0",
-    "straighten": "#f6e8f4",
+#: Phase name -> colour of its span (the strip at the top; the panels shade it lighter).
+PHASE_COLOURS = {
+    "approach": "#c7c7c7",
+    "descend": "#aec7e8",
+    "grasp": "#98df8a",
+    "lift": "#ffbb78",
+    "rotate": "#c5b0d5",
+    "align": "#9edae5",
+    "insert": "#ff9896",
+    "release": "#dbdb8d",
+    "settle": "#f7b6d2",
+    "push": "#ff9896",  # held insertion
+    "search": "#98df8a",
+    "slide": "#98df8a",
+    "straighten": "#c5b0d5",
 }
+_UNKNOWN_PHASE = "#e0e0e0"
+_GRIP, _INSERT = "gripper-peg", "block-peg"
 
 
 def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: Path) -> Path:
-    """Contact force magnitude per pair vs time, with each phase shaded and labelled."""
+    """Draw an episode's force profile as a PNG and return its path.
+
+    Args:
+        trace_npz: the episode's ``forces.npz`` (columns
+            :data:`~peg_ctrl.episode_log.TRACE_COLUMNS`: time [s], forces [N], depth [m]).
+        phases: the phase records (``phase``, ``t_start`` [s], ``t_end`` [s] or None while the
+            phase was still running at the end), as in ``summary.json``.
+        out: the PNG to write (its directory is created).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -36,39 +60,126 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
 
     with np.load(trace_npz) as npz:
         columns = [str(c) for c in npz["columns"]]
-        trace = npz["data"]
-    fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
-    if len(trace):
-        t = trace[:, columns.index("t")]
-        for k, name in enumerate(columns):
-            if "-" not in name:
-                continue
-            values = trace[:, k]
-            if np.any(values > 0):
-                ax.plot(t, values, lw=1.0, label=name)
-        top = max(1e-3, float(np.nanmax(trace[:, [i for i, c in enumerate(columns) if "-" in c]])))
-    else:
-        top = 1.0
-    for rec in phases:
-        if rec.get("phase") in _PHASE_COLOURS and rec.get("t_end") is not None:
-            ax.axvspan(rec["t_start"], rec["t_end"], color=_PHASE_COLOURS[rec["phase"]], zorder=0)
-            ax.text(
-                0.5 * (rec["t_start"] + rec["t_end"]),
-                top * 1.02,
-                rec["phase"],
-                ha="center",
-                va="bottom",
-                fontsize=7,
-                rotation=90,
-            )
-    ax.set_ylim(0, top * 1.25)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("net contact force [N]")
-    ax.set_title("Contact force per body pair")
-    ax.legend(loc="upper left", fontsize=8, ncol=3)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
+        trace = np.asarray(npz["data"], dtype=float)
+    t = trace[:, columns.index("t")] if len(trace) else np.zeros(0)
+    t_last = float(t[-1]) if len(t) else 1.0
+    spans = [
+        (
+            str(rec["phase"]),
+            float(rec["t_start"]),
+            float(rec["t_end"] if rec.get("t_end") is not None else t_last),
+        )
+        for rec in phases
+        if rec.get("t_start") is not None
+    ]
+
+    def column(name: str) -> np.ndarray | None:
+        return trace[:, columns.index(name)] if name in columns and len(trace) else None
+
+    others = [
+        c
+        for c in columns
+        if "-" in c and c not in (_GRIP, _INSERT) and (v := column(c)) is not None and np.any(v > 0)
+    ]
+    depth = column("peg_depth_m")
+    panels = ["grip", "insert", *(["others"] if others else []), *(["height"] if depth is not None else [])]
+    heights = {"grip": 1.0, "insert": 1.3, "others": 0.8, "height": 0.9}
+    fig, axes = plt.subplots(
+        len(panels) + 1,
+        1,
+        figsize=(10, 1.9 * len(panels) + 1.2),
+        dpi=110,
+        sharex=True,
+        height_ratios=[0.28, *(heights[p] for p in panels)],
+        layout="constrained",
+    )
+    strip, panel_axes = axes[0], dict(zip(panels, axes[1:], strict=True))
+
+    def draw(ax: Any, name: str, label: str, colour: str, lw: float = 0.9) -> None:
+        values = column(name)
+        if values is not None:
+            ax.plot(t, values, lw=lw, color=colour, label=label)
+
+    grip_ax = panel_axes["grip"]
+    load_ax = grip_ax.twinx()  # the net load is a fraction of a newton next to tens of the squeeze
+    draw(grip_ax, "grip_force_n", "grip: the pads' squeeze (left axis)", "C1", lw=1.1)
+    draw(load_ax, _GRIP, "net gripper-peg force: the load carried (right axis)", "C2")
+    grip_ax.set_ylabel("grip [N]", color="C1")
+    load_ax.set_ylabel("load [N]", color="C2")
+    load_ax.set_ylim(bottom=0.0)
+    grip_ax.set_title("grasp", fontsize=8, loc="left")
+    handles = grip_ax.get_lines() + load_ax.get_lines()
+    if handles:
+        grip_ax.legend(handles, [h.get_label() for h in handles], loc="upper left", fontsize=7, ncol=2)
+    draw(panel_axes["insert"], _INSERT, "peg-block", "C3")
+    panel_axes["insert"].set_ylabel("insertion [N]")
+    panel_axes["insert"].set_title("peg-block contact force", fontsize=8, loc="left")
+    insert = column(_INSERT)
+    if insert is None or not np.any(insert > 0):
+        panel_axes["insert"].text(
+            0.5,
+            0.5,
+            "the peg never touched the block",
+            transform=panel_axes["insert"].transAxes,
+            ha="center",
+            va="center",
+            fontsize=9,
+            color="0.35",
+        )
+    if others:
+        ax = panel_axes["others"]
+        for k, name in enumerate(others):
+            draw(ax, name, name, f"C{(k + 4) % 10}", lw=0.8)
+        ax.set_ylabel("other [N]")
+        ax.set_title("other contacts", fontsize=8, loc="left")
+        ax.legend(loc="upper left", fontsize=7, ncol=len(others))
+    if depth is not None:
+        ax = panel_axes["height"]
+        ax.plot(t, -depth * 1e3, lw=1.0, color="C0")
+        ax.axhline(0.0, color="0.3", lw=0.7, ls="--")
+        ax.set_ylabel("height [mm]")
+        ax.set_title("height of the peg's lower end above the hole's mouth (dashed)", fontsize=8, loc="left")
+    for ax in panel_axes.values():
+        ax.grid(alpha=0.3)
+        ax.margins(x=0)
+        for name, start, end in spans:
+            ax.axvspan(start, end, color=PHASE_COLOURS.get(name, _UNKNOWN_PHASE), alpha=0.3, lw=0, zorder=0)
+    if "grip" in panel_axes and "insert" in panel_axes:
+        for ax in (panel_axes["grip"], panel_axes["insert"]):
+            ax.set_ylim(bottom=0.0)
+    axes[-1].set_xlabel("time [s]")
+    axes[-1].set_xlim(0.0, t_last if len(t) else 1.0)
+    _phase_strip(fig, strip, spans)
+    fig.suptitle("Contact forces by phase", fontsize=11)
+    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
     plt.close(fig)
     return out
+
+
+def _phase_strip(fig: Any, ax: Any, spans: list[tuple[str, float, float]]) -> list[str]:
+    """Coloured spans with the phase names inside them; a name that does not fit its span is
+    shortened to three letters, and left out if even that does not fit. Returns the labels
+    drawn, in order."""
+    ax.set_yticks([])
+    ax.set_ylim(0.0, 1.0)
+    for side in ("top", "right", "left"):
+        ax.spines[side].set_visible(False)
+    ax.tick_params(axis="x", which="both", length=0)
+    for name, start, end in spans:
+        ax.axvspan(start, end, color=PHASE_COLOURS.get(name, _UNKNOWN_PHASE), lw=0.5, ec="white")
+    fig.canvas.draw()  # the final layout, to measure the labels against their spans
+    renderer = fig.canvas.get_renderer()
+    drawn = []
+    for name, start, end in spans:
+        (x0, _), (x1, _) = ax.transData.transform([(start, 0.0), (end, 0.0)])
+        for text in (name, name[:3] + "."):
+            label = ax.text(
+                0.5 * (start + end), 0.5, text, ha="center", va="center", fontsize=8, clip_on=True
+            )
+            if label.get_window_extent(renderer).width <= 0.92 * (x1 - x0):
+                drawn.append(text)
+                break
+            label.remove()
+    return drawn

@@ -2,21 +2,36 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
 from peg_ctrl.commands import quat_to_euler
 from peg_ctrl.episode_log import TRACE_COLUMNS, EpisodeLogger
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.io import atomic_write_bytes
+from peg_ctrl.scene import PINCH_SITE
 from peg_ctrl.state import PAIRS
 
 if TYPE_CHECKING:
     from peg_ctrl.loop import Loop, StepInfo
 
-__all__ = ["TraceRecorder", "StepLogRecorder", "VideoRecorder", "CallbackRecorder", "step_record"]
+__all__ = [
+    "TraceRecorder",
+    "StepLogRecorder",
+    "StateRecorder",
+    "read_states",
+    "VideoRecorder",
+    "FollowCamera",
+    "FOLLOW",
+    "CallbackRecorder",
+    "step_record",
+]
 
 
 def _round(values: Any, digits: int = 6) -> list[float]:
@@ -76,6 +91,7 @@ class TraceRecorder:
         q = self._peg[:n]  # the lower end: centre - half length * |axis z| (axis z = 1 - 2(x^2+y^2))
         axis_z = np.abs(1.0 - 2.0 * (q[:, 4] ** 2 + q[:, 5] ** 2))
         rows[:, 3 + len(PAIRS)] = self._top - (q[:, 2] - self._half * axis_z)
+        rows[:, 4 + len(PAIRS)] = self._sensors.grip(self._raw[:n])
         self.logger.trace(rows)
         self._n = 0
         self._t_end, self._phase = [], []
@@ -137,37 +153,176 @@ class StepLogRecorder:
             self._phases_logged += 1
 
 
+class StateRecorder:
+    """The simulation state at every control step, for replays: time [s] and the full ``qpos``
+    (``nq``,) after the step, plus the state at :meth:`start`. One array copy per control step
+    into a buffer that doubles when full; :meth:`close` writes ``states.npz`` (arrays ``time``
+    (n,), ``qpos`` (n, nq), and ``nq``) atomically, so a reader never sees a torn file."""
+
+    def __init__(self, path: Path, nq: int, *, capacity: int = 4096) -> None:
+        self.path = Path(path)
+        self.nq = nq
+        self.n = 0  # states held
+        self._time = np.empty(capacity)
+        self._qpos = np.empty((capacity, nq))
+
+    def start(self, data: mujoco.MjData) -> None:
+        """Keep the state before the first step (after the loop's reset)."""
+        self._append(float(data.time), data.qpos)
+
+    def record(self, loop: Loop, info: StepInfo) -> None:
+        self._append(info.t, loop.data.qpos)
+
+    def _append(self, t: float, qpos: NDArray[np.float64]) -> None:
+        if self.n == len(self._time):
+            self._time = np.resize(self._time, 2 * self.n)
+            self._qpos = np.resize(self._qpos, (2 * self.n, self.nq))
+        self._time[self.n] = t
+        self._qpos[self.n] = qpos
+        self.n += 1
+
+    def close(self) -> Path:
+        """Write ``states.npz`` atomically; returns its path."""
+        import io
+
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, time=self._time[: self.n], qpos=self._qpos[: self.n], nq=self.nq)
+        return atomic_write_bytes(self.path, buffer.getvalue())
+
+
+def read_states(path: Path) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(time (n,) [s], qpos (n, nq)) of a ``states.npz`` written by :class:`StateRecorder`."""
+    with np.load(path) as npz:
+        return np.asarray(npz["time"], dtype=float), np.asarray(npz["qpos"], dtype=float)
+
+
+class FollowCamera:
+    """A free camera that keeps the peg and the gripper's pinch point in frame: it looks at
+    their midpoint from a fixed direction (``azimuth`` and ``elevation`` [deg], MuJoCo's
+    convention: azimuth 90 looks along +Y) and backs off as they move apart, never closer than
+    ``min_distance`` [m], with ``margin`` [m] kept free around them.
+
+    The default looks across the table from its +Y side, a little towards -X (the peg's start):
+    there, the body of the gripper, once turned, stays behind the peg rather than in front of it.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        *,
+        azimuth: float = -60.0,
+        elevation: float = -22.0,
+        min_distance: float = 0.32,
+        margin: float = 0.07,
+    ) -> None:
+        self._peg = model.body("peg").id
+        self._pinch = model.site(PINCH_SITE).id
+        self._margin = margin  # [m] kept free around the two points
+        self._min_distance = min_distance
+        self._tan = math.tan(math.radians(0.5 * float(model.vis.global_.fovy)))
+        self.camera = mujoco.MjvCamera()
+        self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
+        self.camera.azimuth = azimuth
+        self.camera.elevation = elevation
+
+    def update(self, data: mujoco.MjData) -> mujoco.MjvCamera:
+        """Aim the camera at the state in ``data`` (after ``mj_forward``/``mj_step``); returns it."""
+        peg, pinch = data.xpos[self._peg], data.site_xpos[self._pinch]
+        half = 0.5 * float(np.linalg.norm(peg - pinch))
+        self.camera.lookat[:] = 0.5 * (peg + pinch)
+        # Both points within 80 % of the half field of view.
+        self.camera.distance = max(self._min_distance, (half + self._margin) / (0.8 * self._tan))
+        return self.camera
+
+
+#: The views a video can show side by side: ``"follow"`` (a :class:`FollowCamera`) or the name
+#: of one of the model's cameras (``"insertion"``: fixed on the hole; ``"overview"``).
+FOLLOW = "follow"
+
+
 class VideoRecorder:
-    """Offscreen frames from ``camera`` at ``fps``, written as MP4 by :meth:`close`."""
+    """Offscreen video at ``fps`` [frames/s], written as MP4 (H.264) by :meth:`close`.
+
+    Each frame shows ``views`` side by side, each ``size`` = (height, width) [px]: by default on
+    the left a camera that follows the peg and the gripper (:class:`FollowCamera`), on the right
+    the fixed close-up of the hole (the model's ``insertion`` camera). In the loop it records a
+    frame every ``1/fps`` s of simulated time; :meth:`add_frame` adds one from any ``MjData``
+    (e.g. a replay).
+
+    Raises:
+        ConfigError: a view that is neither ``"follow"`` nor one of the model's cameras (the
+            message lists them), no views, or ``fps`` < 1.
+    """
 
     def __init__(
         self,
         model: mujoco.MjModel,
         path: Path,
         *,
-        camera: str = "insertion",
+        views: Sequence[str] = (FOLLOW, "insertion"),
         fps: int = 30,
         size: tuple[int, int] = (480, 640),
     ) -> None:
         import imageio.v2 as imageio
 
-        self.path = path
-        self.camera = camera
+        cameras = [model.camera(i).name for i in range(model.ncam)]
+        if not views:
+            raise ConfigError("video views must name at least one view")
+        for view in views:
+            if view != FOLLOW and view not in cameras:
+                raise ConfigError(f"unknown video view {view!r}; known: {', '.join([FOLLOW, *cameras])}")
+        if fps < 1:
+            raise ConfigError(f"video fps must be >= 1, got {fps}")
+        self.path = Path(path)
+        self.views = tuple(views)
+        self.fps = fps
+        self.size = size
+        self.frames = 0  # frames written
         self._period = 1.0 / fps
         self._next = 0.0
+        self._follow = FollowCamera(model) if FOLLOW in self.views else None
         self._renderer = mujoco.Renderer(model, *size)
-        self._writer = imageio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=8)
+        self._writer = imageio.get_writer(
+            str(self.path), fps=fps, codec="libx264", quality=7, macro_block_size=8
+        )
+        self._closed = False
+
+    def cameras(self, data: mujoco.MjData) -> list[mujoco.MjvCamera | str]:
+        """The camera of each view, aimed at the state in ``data``."""
+        out: list[mujoco.MjvCamera | str] = []
+        for view in self.views:
+            if view == FOLLOW:
+                assert self._follow is not None
+                out.append(self._follow.update(data))
+            else:
+                out.append(view)
+        return out
+
+    def render(self, data: mujoco.MjData) -> NDArray[np.uint8]:
+        """The frame of the state in ``data``: (height, width x views, 3) RGB."""
+        images = []
+        for camera in self.cameras(data):
+            self._renderer.update_scene(data, camera=camera)
+            images.append(self._renderer.render())
+        return np.concatenate(images, axis=1)
+
+    def add_frame(self, data: mujoco.MjData) -> None:
+        """Render the state in ``data`` and append it to the video."""
+        self._writer.append_data(self.render(data))
+        self.frames += 1
 
     def record(self, loop: Loop, info: StepInfo) -> None:
         if info.t + 1e-9 < self._next:
             return
         self._next += self._period
-        self._renderer.update_scene(loop.data, camera=self.camera)
-        self._writer.append_data(self._renderer.render())
+        self.add_frame(loop.data)
 
     def close(self) -> str:
-        self._writer.close()
-        self._renderer.close()
+        """Finish the MP4 and free the renderer; returns the video's path."""
+        if not self._closed:
+            self._closed = True
+            self._writer.close()
+            self._renderer.close()
         return str(self.path)
 
 

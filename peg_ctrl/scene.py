@@ -354,6 +354,8 @@ _GROUP_OBJECTS = {
     "block": (mujoco.mjtObj.mjOBJ_BODY, "block"),
     "table": (mujoco.mjtObj.mjOBJ_GEOM, "table"),
 }
+#: The finger-pad bodies of the 2F-85 (without the ``2f85/`` prefix), left then right.
+PAD_BODIES = ("left_pad", "right_pad")
 _CON_FOUND, _CON_FORCE, _CON_DIST = 1, 2, 8  # mjtConDataField bits
 _REDUCE_MINDIST, _REDUCE_NETFORCE = 1, 3
 
@@ -402,6 +404,15 @@ def _add_contact_sensors(spec: mujoco.MjSpec) -> None:
         sensor.objtype, sensor.objname = _GROUP_OBJECTS["peg"]
         sensor.reftype, sensor.refname = _GROUP_OBJECTS[other]
         sensor.intprm = [_CON_FOUND | _CON_DIST, _REDUCE_MINDIST, 1]
+    # Each finger pad on the peg: the grip (squeeze) is half their difference, which the net
+    # gripper-peg force cancels (StateReader.grip_sensors).
+    for pad in PAD_BODIES:
+        sensor = spec.add_sensor()
+        sensor.name = contact_sensor_name("force", pad, "peg")
+        sensor.type = mujoco.mjtSensor.mjSENS_CONTACT
+        sensor.objtype, sensor.objname = _GROUP_OBJECTS["peg"]
+        sensor.reftype, sensor.refname = mujoco.mjtObj.mjOBJ_BODY, f"{GRIPPER_PREFIX}{pad}"
+        sensor.intprm = [_CON_FOUND | _CON_FORCE, _REDUCE_NETFORCE, 1]
 
 
 def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel, cfg: SceneConfig) -> None:

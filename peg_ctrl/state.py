@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, SLIDE_JOINTS, contact_sensor_name
+from peg_ctrl.scene import BALL_JOINT, GRIPPER_PREFIX, PAD_BODIES, SLIDE_JOINTS, contact_sensor_name
 
 __all__ = [
     "ControlState",
@@ -195,6 +195,14 @@ class StateReader:
             # MuJoCo uses the larger margin of the two geoms; take the group's largest.
             margin = max(peg_margin, float(model.geom_margin[geoms].max()) if len(geoms) else 0.0)
             self._dist_sensors.append((k, int(model.sensor_adr[sid]), margin))
+        pads = [
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, contact_sensor_name("force", pad, "peg"))
+            for pad in PAD_BODIES
+        ]
+        #: sensordata addresses of the left and right pad-peg force sensors (None without them).
+        self.grip_sensors = (
+            (int(model.sensor_adr[pads[0]]), int(model.sensor_adr[pads[1]])) if min(pads) >= 0 else None
+        )
 
     @staticmethod
     def _classify_bodies(model: mujoco.MjModel) -> NDArray[np.int64]:
@@ -294,7 +302,9 @@ class StateReader:
 
     def sensor_block(self, rows: int) -> SensorBlock:
         """A :class:`SensorBlock` for ``rows`` physics steps of this model's contact sensors."""
-        return SensorBlock(self._force_sensors, self._dist_sensors, rows, self.model.nsensordata)
+        return SensorBlock(
+            self._force_sensors, self._dist_sensors, rows, self.model.nsensordata, grip=self.grip_sensors
+        )
 
     def sim_state(self, data: mujoco.MjData) -> SimState:
         pq = data.qpos[self._peg_q : self._peg_q + 7].copy()
@@ -328,8 +338,11 @@ class SensorBlock:
         dist_sensors: list[tuple[int, int, float]],
         rows: int,
         nsensordata: int,
+        *,
+        grip: tuple[int, int] | None = None,
     ) -> None:
         self.rows = rows
+        self._grip = grip
         self.raw = np.zeros((rows, nsensordata))
         self.force_sq = np.zeros((rows, len(PAIRS)))
         self._sq = np.zeros((rows, nsensordata))
@@ -357,6 +370,16 @@ class SensorBlock:
     def forces(self, raw: NDArray[np.float64]) -> NDArray[np.float64]:
         """Net force per pair (n, len(PAIRS)) [N] of sensor rows ``raw`` (n, nsensordata)."""
         return np.sqrt((raw * raw) @ self._sum)
+
+    def grip(self, raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The grip (n,) [N] of sensor rows ``raw``: half the difference of the two finger pads'
+        net forces on the peg. The pads press from opposite sides, so this is their squeeze (the
+        weight they carry together cancels); NaN if the model has no pad sensors."""
+        if self._grip is None:
+            return np.full(len(raw), np.nan)
+        left, right = self._grip
+        diff = raw[:, left + 1 : left + 4] - raw[:, right + 1 : right + 4]
+        return 0.5 * np.sqrt((diff * diff).sum(axis=1))
 
     def penetrations(self, raw: NDArray[np.float64]) -> NDArray[np.float64]:
         """Deepest penetration over the peg partners (n,) [m] of sensor rows ``raw``."""

@@ -42,7 +42,7 @@ def run_battery(
     out: Path, profiles: Sequence[str], *, trials: int = 10, seed: int = 0, progress: bool = True
 ) -> Path:
     """Run the battery for each profile into ``out``; returns the path of ``validity.md``."""
-    from tqdm import tqdm
+    from peg_ctrl.progress import progress_bar
 
     n_checks = len(chamfer_cases()) + len(tilt_cases()) + 1
     total = len(profiles) * (len(CLEARANCES) * trials + n_checks)
@@ -53,7 +53,7 @@ def run_battery(
         "profiles": {},
     }
     study: dict[str, list[Trial]] = {}
-    with tqdm(total=total, desc="validity", unit="push", disable=not progress) as bar:
+    with progress_bar(total=total, desc="validity", unit="push", enabled=progress) as bar:
         for name in profiles:
             bar.set_postfix_str(name)
 

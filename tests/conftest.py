@@ -8,9 +8,14 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-import mujoco
-import numpy as np
-import pytest
+# Offscreen rendering in the tests (videos, replays) without a window system, as peg-sim does:
+# mujoco reads MUJOCO_GL when it first renders, from the value set before it was imported.
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers import make_controller

@@ -84,7 +84,7 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
     reader = imageio.get_reader(str(tmp_path / "episode.mp4"))
     frames = [frame for frame in reader]
     assert len(frames) == 19  # 0 .. 0.6 s at 30 fps, both ends
-    assert frames[0].shape == (480, 640, 3)
+    assert frames[0].shape == (480, 1280, 3)  # the follow view and the hole close-up, side by side
     assert frames[-1].std() > 10  # a rendered scene, not a blank frame
 
 
@@ -97,13 +97,19 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         ),
         (["bench", "--repeats", "many"], "argument --repeats: invalid int value: 'many'"),
         (["bench", "--repeats", "0"], "--repeats must be >= 1"),
-        (["bench", "--task", "nope"], "--task must be one of default, contact, got 'nope'"),
-        (["bench", "--profile", "nope"], "--profile: unknown physics profile 'nope'"),
+        (["bench", "--task", "nope"], "--task: unknown task 'nope'; known: contact, default"),
+        (
+            ["bench", "--profile", "nope"],
+            "--profile: unknown physics profile 'nope'; known: fast, precision, seed",
+        ),
         (["bench", "--control-dt", "0.0015"], "not a whole multiple"),
-        (["validate-profile", "nope"], "profile: unknown physics profile 'nope'"),
+        (["validate-profile", "nope"], "PROFILE: unknown physics profile 'nope'"),
+        (["validity", "--profile", "nope"], "--profile: unknown physics profile 'nope'"),
         (["validate-profile", "fast", "--reference", "fast"], "--reference must differ"),
         (["validate-profile", "fast", "--seeds", "1"], "--seeds must be >= 2"),
-        (["calibrate", "--samples", "2"], "--samples must be >= 4"),
+        (["calibrate", "--out", "jaw.json", "--samples", "2"], "--samples must be >= 4"),
+        (["calibrate"], "one of the arguments --out --replace-packaged is required"),
+        (["calibrate", "--out", "jaw.json", "--replace-packaged"], "not allowed with argument --out"),
         (["sweep"], "one of the arguments config --list is required"),
         (
             ["sweep", "nope"],
@@ -111,9 +117,19 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         ),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
-            ["run", "--controller", "nope"],
-            "unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
+            ["teleop", "--scripted", "--controller", "nope"],
+            "--controller: unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
         ),
+        (
+            ["teleop", "--scripted", "--seed", "3"],
+            "--seed only changes the peg's start pose with --randomize",
+        ),
+        (
+            ["run", "--controller", "nope"],
+            "--controller: unknown controller 'nope'; known: admittance, diffik, impedance, mpc, pd",
+        ),
+        (["run", "--seed", "3"], "--seed has no effect here: the start pose is drawn only with --randomize"),
+        (["run", "--seed", "0", "--set", "randomization.enabled=false"], "add --randomize"),
         (["run", "--planner", "warp"], "unknown planner 'warp'; known: fixed_speed, ruckig"),
         (["run", "--seed", "-3"], "seed must be >= 0"),
         (["run", "--config", "missing.yaml"], "does not exist"),
@@ -271,3 +287,176 @@ def test_sweep_resolves_a_shipped_name_unless_a_file_exists(
     monkeypatch.chdir(tmp_path)
     (tmp_path / "quick").write_text("name: mine\n")
     assert cli._resolve_experiment("quick") == Path("quick")
+
+
+def test_version_prints_the_installed_version(capsys: pytest.CaptureFixture[str]) -> None:
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out == f"peg-sim {version('peg-ctrl')}\n"
+
+
+def test_version_falls_back_when_not_installed(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.metadata
+
+    def missing(name: str) -> str:
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    assert cli._version() == "unknown (not installed)"
+
+
+def _command_lines(help_text: str) -> dict[str, list[str]]:
+    """``peg-sim --help``'s command list: each command's help, line by line."""
+    section = help_text.split("\n  COMMAND\n", 1)[1].split("\n\n", 1)[0]
+    commands: dict[str, list[str]] = {}
+    name = ""
+    for line in section.splitlines():
+        if line.startswith("    ") and not line.startswith("     "):  # "    name   help"
+            name, _, text = line.strip().partition(" ")
+            commands[name] = [text.strip()] if text.strip() else []
+        else:  # a continuation: the help of a long name, or a wrapped help
+            commands[name].append(line.strip())
+    return commands
+
+
+def test_every_subcommand_has_a_one_line_help_and_a_description(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    commands = _command_lines(capsys.readouterr().out)
+    assert set(SUBCOMMANDS) <= set(commands)
+    for name, lines in commands.items():
+        assert len(lines) == 1 and lines[0], f"{name}: help must be one line at 80 columns, got {lines}"
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        paragraphs = capsys.readouterr().out.split("\n\n")
+        assert not paragraphs[1].startswith(("positional arguments:", "options:")), f"{name}: no description"
+
+
+def test_help_lists_the_registered_names(capsys: pytest.CaptureFixture[str]) -> None:
+    from peg_ctrl.controllers import REGISTRY
+    from peg_ctrl.physics import PROFILES
+    from peg_ctrl.planners import PLANNERS
+
+    for argv, names in [
+        (["run", "--help"], [*REGISTRY, *PLANNERS]),
+        (["teleop", "--help"], REGISTRY),
+        (["bench", "--help"], [*REGISTRY, *PROFILES, "default", "contact"]),
+        (["validity", "--help"], PROFILES),
+    ]:
+        with pytest.raises(SystemExit):
+            main(argv)
+        text = " ".join(capsys.readouterr().out.split())
+        assert all(name in text for name in names), (argv, names)
+
+
+def test_top_level_help_imports_no_registry() -> None:
+    """``peg-sim --help`` stays fast: the registries (and mujoco) load only when a command needs
+    them."""
+    code = "\n".join(
+        [
+            "import sys",
+            "from peg_ctrl.cli import main",
+            "try:",
+            "    main(['--help'])",
+            "except SystemExit:",
+            "    pass",
+            "heavy = ('mujoco', 'peg_ctrl.controllers', 'peg_ctrl.physics')",
+            "print(sorted(m for m in heavy if m in sys.modules))",
+        ]
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.splitlines()[-1] == "[]"
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--randomize"],
+        ["--set", "randomization.enabled=true"],
+        ["--set", "task.name=held_insertion"],  # draws its lateral error direction from the seed
+        ["--set", "domain.friction_scale=[0.8,1.2]"],
+        ["--set", "domain.force_noise=0.1"],
+    ],
+)
+def test_seed_is_accepted_when_the_episode_depends_on_it(
+    extra: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import peg_ctrl.episode
+
+    seen = []
+
+    class Result:
+        status = "success"
+
+        def one_line(self) -> str:
+            return "ok"
+
+    def fake_run(cfg, out, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(cfg)
+        return Result()
+
+    monkeypatch.setattr(peg_ctrl.episode, "run_episode", fake_run)
+    assert main(["run", "--seed", "3", *extra, "--out", str(tmp_path)]) == 0
+    assert seen[0].seed == 3 and seen[0].seeded
+
+
+def _packaged_calibration() -> tuple[bytes, int]:
+    from peg_ctrl.jaw import DEFAULT_PATH
+
+    return DEFAULT_PATH.read_bytes(), DEFAULT_PATH.stat().st_mtime_ns
+
+
+def test_calibrate_without_out_is_refused_and_leaves_the_packaged_table(tmp_path: Path) -> None:
+    before = _packaged_calibration()
+    proc = peg_sim(["calibrate", "--samples", "4"], cwd=tmp_path)
+    assert_one_line_error(proc, "one of the arguments --out --replace-packaged is required")
+    assert _packaged_calibration() == before
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_calibrate_writes_out_and_only_out(tmp_path: Path) -> None:
+    from peg_ctrl.jaw import JawCalibration
+
+    before = _packaged_calibration()
+    proc = peg_sim(["calibrate", "--samples", "4", "--out", "cal/jaw.json"], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""  # no progress bar when stderr is not a terminal
+    cal = JawCalibration.from_file(tmp_path / "cal" / "jaw.json")
+    assert cal.sep_open_m > cal.sep_closed_m
+    assert _packaged_calibration() == before
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["cal", "jaw.json"]
+
+
+def test_calibrate_replace_packaged_is_refused_in_an_installed_copy(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import peg_ctrl.jaw
+
+    before = _packaged_calibration()
+    monkeypatch.setattr(peg_ctrl.jaw, "source_tree_path", lambda: None)
+    assert main(["calibrate", "--replace-packaged"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("peg-sim: error: --replace-packaged works only in a source checkout")
+    assert len(err.splitlines()) == 1
+    assert _packaged_calibration() == before
+
+
+def test_teleop_interrupted_keeps_its_records(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from peg_ctrl.episode_log import read_trace
+    from peg_ctrl.teleop import ScriptedOperator
+
+    def interrupted(self, **kwargs):  # type: ignore[no-untyped-def]
+        self.session.advance(0.1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ScriptedOperator, "run", interrupted)
+    assert main(["teleop", "--scripted", "--out", str(tmp_path)]) == 130
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert (summary["status"], summary["end"]) == ("interrupted", "interrupted")
+    assert read_trace(tmp_path / "forces.npz").shape[0] == summary["total_timesteps"] == 100

@@ -340,3 +340,86 @@ def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path:
     assert "## Success per grid cell" in report and "## Which arms differ" in report
     for name in ("success_vs_disturbance.png", "force_vs_depth.png", "peak_force.png"):
         assert (tmp_path / name).stat().st_size > 10_000, name
+
+
+# -- the report from episodes.csv alone -----------------------------------------------------------
+def _contact_rows() -> list[dict]:
+    """Two arms x two lateral errors x 8 seeds; the friction drawn per seed; no traces."""
+    rows = []
+    for arm, wins_at in (("pd/spiral", {0.0005: 8, 0.003: 2}), ("impedance/spiral", {0.0005: 8, 0.003: 7})):
+        for error, wins in wins_at.items():
+            for seed in range(8):
+                ok = seed < wins
+                rows.append(
+                    {
+                        "key": f"{arm}-{error}-{seed}",
+                        "arm": arm,
+                        "controller": arm.split("/")[0],
+                        "task": "held_insertion",
+                        "strategy": "spiral",
+                        "planner": "ruckig",
+                        "clearance_m": "0.0001",
+                        "seed": str(seed),
+                        "friction_scale": str(0.8 + 0.05 * seed),
+                        "gain_scale": "1.0",
+                        "status": "success" if ok else "failure",
+                        "reason": "" if ok else "wedged",
+                        "phase": "push" if ok else "search",
+                        "peak_contact_force_n": str(10.0 + seed + (20.0 if arm.startswith("pd") else 0.0)),
+                        "time_to_insert_s": "4.0" if ok else "",
+                        "contact_to_seat_s": "3.0" if ok else "",
+                        "log_path": f"episodes/{arm}-{error}-{seed}/log.jsonl",
+                        "task.lateral_error": str(error),
+                        "task.tilt_error": "0.0",
+                    }
+                )
+    return rows
+
+
+def _write_csv(out: Path, rows: list[dict]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "episodes.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_swept_conditions_are_the_varied_columns() -> None:
+    from peg_ctrl.experiments.report import swept_conditions
+    from peg_ctrl.experiments.stats import episodes_frame
+
+    # Constant: the clearance, the tilt, the gain scale; varied: the lateral error, the friction.
+    assert swept_conditions(episodes_frame(_contact_rows())) == ["task.lateral_error", "friction_scale"]
+
+
+def test_success_table_counts_per_arm_and_level_with_wilson_intervals() -> None:
+    from peg_ctrl.experiments.report import _success_table
+    from peg_ctrl.experiments.stats import episodes_frame
+
+    df = episodes_frame(_contact_rows())
+    df["won"] = df["status"] == "success"
+    table = _success_table(df, "task.lateral_error")
+    row = table[(table["arm"] == "pd/spiral") & (table["x"] == 0.003)].iloc[0]
+    assert (row["k"], row["n"], row["rate"]) == (2, 8, 0.25)
+    assert (row["low"], row["high"]) == wilson_interval(2, 8)
+    assert len(table) == 4 and not table.attrs["binned"]
+    # Eight friction values (one per seed): four quartile bins per arm, at the bins' medians.
+    friction = _success_table(df, "friction_scale")
+    assert friction.attrs["binned"] and len(friction) == 8
+    assert friction.groupby("arm")["n"].sum().tolist() == [16, 16]
+    assert friction["x"].iloc[0] == pytest.approx(0.825)  # the median of 0.80 and 0.85
+
+
+def test_a_report_from_episodes_csv_alone_leaves_out_the_trace_plots(tmp_path: Path) -> None:
+    """Without the episodes' traces, no blank per-arm panels: the trace plots are left out."""
+    from peg_ctrl.experiments.report import write_report
+
+    _write_csv(tmp_path, _contact_rows())
+    report = write_report(tmp_path).read_text()
+    for name in ("success_vs_disturbance.png", "peak_force.png", "failures.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+        assert f"({name})" in report
+    for name in ("force_profiles.png", "force_vs_depth.png", "success_vs_clearance.png"):
+        assert not (tmp_path / name).exists(), name
+    assert "force traces (`episodes/<key>/forces.npz`) are not in this directory" in report
+    assert "| pd/spiral | 8/8, 33.5 N | 2/8, 33.5 N |" in report  # the grid-cell table

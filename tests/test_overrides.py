@@ -59,6 +59,18 @@ def test_config_files_read_exponents_as_numbers(tmp_path: Path) -> None:
     }
 
 
+def test_an_integral_exponent_fills_an_integer_field(tmp_path: Path) -> None:
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.episode import episode_config_from_mapping
+
+    (tmp_path / "c.yaml").write_text("max_steps: 1e5\nsuccess: {force_spike: 1e9}\n")
+    cfg = episode_config_from_mapping(read_mapping(tmp_path / "c.yaml"))
+    assert cfg.max_steps == 100_000 and type(cfg.max_steps) is int
+    assert cfg.success.force_spike == 1e9
+    with pytest.raises(ConfigError, match=r"max_steps: expected an integer, got 1500.5"):
+        episode_config_from_mapping({"max_steps": 1.5e3 + 0.5})
+
+
 @pytest.mark.parametrize(
     "text, value, kind",
     [

@@ -40,3 +40,21 @@ def test_contact_dict_has_the_log_fields(sim: Tracker, model: mujoco.MjModel) ->
     d = c.to_dict()
     assert set(d) == {"pair", "force", "magnitude", "position", "count", "max_penetration_m"}
     assert d["pair"] == "peg-table"
+
+
+def test_grip_is_the_pads_squeeze_that_the_net_force_cancels() -> None:
+    """A peg held in the closed hand: the pads squeeze it with tens of newtons from both sides,
+    while the net gripper-peg force is only the peg's weight."""
+    from peg_ctrl.episode import build_loop, episode_config_from_mapping
+    from peg_ctrl.state import BLOCK_PEG, PAIRS
+
+    loop = build_loop(episode_config_from_mapping({"task": {"name": "held_insertion"}}))
+    loop.reset(np.random.default_rng(0))
+    loop.step()
+    grip = loop.sensors.grip(loop.sensors.raw)
+    net = loop.sensors.forces(loop.sensors.raw)[:, PAIRS.index(("gripper", "peg"))]
+    weight = float(loop.model.body_mass[loop.model.body("peg").id]) * 9.81
+    assert grip.shape == (loop.decimation,)
+    assert np.all(grip > 10.0)
+    assert np.allclose(net, weight, rtol=0.2)  # the net force carries the weight, nothing more
+    assert loop.sensors.forces(loop.sensors.raw)[:, BLOCK_PEG].max() == 0.0

@@ -1,12 +1,23 @@
-"""Sweep statistics: Holm correction, exact success tests, rank tests, bootstrap intervals."""
+"""Sweep statistics: Holm correction, Wilson and bootstrap intervals (SciPy, checked against the
+formulas), exact success tests, rank tests, the episodes table."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.stats import boschloo_exact, mannwhitneyu
+from scipy.stats import binomtest, boschloo_exact, mannwhitneyu
 
-from peg_ctrl.experiments.stats import ALPHA, compare_arms, holm, location_test, median_ci, success_test
+from peg_ctrl.config import ConfigError
+from peg_ctrl.experiments.stats import (
+    ALPHA,
+    compare_arms,
+    episodes_frame,
+    holm,
+    location_test,
+    median_ci,
+    success_test,
+    wilson_interval,
+)
 
 
 def test_holm_matches_the_textbook_example() -> None:
@@ -103,3 +114,81 @@ def test_held_insertion_times_are_from_first_contact() -> None:
     (pair,) = compare_arms(rows)
     assert pair.time_median_a == pytest.approx(1.045) and pair.time_median_b == pytest.approx(3.045)
     assert pair.p_time is not None and pair.p_time < ALPHA
+
+
+# -- SciPy in place of the hand-written intervals: the same numbers -------------------------------
+def _wilson_by_hand(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """The score interval as the report used to compute it (Wilson 1927)."""
+    p = k / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@pytest.mark.parametrize("k, n", [(0, 10), (1, 10), (19, 20), (20, 20), (30, 60), (59, 60), (3, 7)])
+def test_wilson_interval_is_scipys_and_matches_the_formula(k: int, n: int) -> None:
+    lo, hi = wilson_interval(k, n)
+    assert (lo, hi) == pytest.approx(_wilson_by_hand(k, n), abs=1e-8)
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    assert (lo, hi) == (ci.low, ci.high)
+
+
+def test_wilson_interval_edges_and_bad_counts() -> None:
+    assert wilson_interval(10, 10)[1] == 1.0 and wilson_interval(0, 10)[0] == 0.0  # exactly
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+    with pytest.raises(ConfigError, match=r"successes must be in \[0, n=5\], got 6"):
+        wilson_interval(6, 5)
+    with pytest.raises(ConfigError, match=r"confidence must be in \(0, 1\), got 1.5"):
+        wilson_interval(1, 5, confidence=1.5)
+
+
+def _median_ci_by_hand(x: np.ndarray, seed: int) -> tuple[float, float]:
+    """The percentile bootstrap as the report used to compute it."""
+    rng = np.random.default_rng(seed)
+    medians = np.median(rng.choice(x, size=(2000, len(x)), replace=True), axis=1)
+    lo, hi = np.percentile(medians, [2.5, 97.5])
+    return float(lo), float(hi)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 7])
+def test_median_ci_is_scipys_bootstrap_with_the_same_numbers(seed: int) -> None:
+    x = np.random.default_rng(100 + seed).exponential(10.0, size=25 + seed)
+    med, lo, hi = median_ci(x.tolist(), seed=seed)
+    assert med == np.median(x)
+    assert (lo, hi) == pytest.approx(_median_ci_by_hand(x, seed), rel=1e-12)
+
+
+def test_holm_matches_the_step_down_loop() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        p = rng.uniform(0.0, 0.2, size=rng.integers(1, 12)).tolist()
+        expected, running = [0.0] * len(p), 0.0
+        for rank, i in enumerate(np.argsort(p, kind="stable")):
+            running = max(running, min(1.0, (len(p) - rank) * p[i]))
+            expected[i] = running
+        assert holm(p) == pytest.approx(expected)
+
+
+def test_episodes_frame_reads_csv_strings_as_numbers() -> None:
+    rows = [
+        {
+            "controller": "pd",
+            "arm": "",
+            "clearance_m": "0.0001",
+            "peak_contact_force_n": "5.5",
+            "time_to_insert_s": "",
+        },
+        {
+            "controller": "pd",
+            "arm": "pd/spiral",
+            "clearance_m": "0.0001",
+            "peak_contact_force_n": "7",
+            "time_to_insert_s": "3.25",
+        },
+    ]
+    df = episodes_frame(rows)
+    assert list(df["arm"]) == ["pd", "pd/spiral"]
+    assert df["peak_contact_force_n"].tolist() == [5.5, 7.0]
+    assert np.isnan(df["time_to_insert_s"][0]) and df["time_to_insert_s"][1] == 3.25
+    assert df["clearance_m"].dtype == float

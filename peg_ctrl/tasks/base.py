@@ -156,6 +156,12 @@ class TaskSpec:
     def check(self, scene: SceneConfig) -> None:
         """Raise :class:`ConfigError` if this task cannot run in ``scene`` (default: it can)."""
 
+    def draws_from_seed(self, randomization: Any) -> bool:
+        """Whether the task's reset draws from the episode's seed, given the episode's
+        ``randomization`` (a :class:`~peg_ctrl.tasks.pick_and_place.RandomizationConfig`).
+        Default: it does."""
+        return True
+
     @classmethod
     def select(cls, data: object, *, prefix: str = "task.") -> TaskSpec:
         """The config named by ``data``: a name, a mapping ``{"name": ..., <fields>}`` or a config.

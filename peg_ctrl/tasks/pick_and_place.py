@@ -112,6 +112,10 @@ class TaskConfig(TaskSpec):
             jaw=context.jaw,
         )
 
+    def draws_from_seed(self, randomization: RandomizationConfig) -> bool:
+        """The start pose is drawn from the seed only with ``randomization.enabled``."""
+        return randomization.enabled
+
 
 PickAndPlaceConfig = TaskConfig  # the name in the task family
 

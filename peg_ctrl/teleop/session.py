@@ -1,11 +1,20 @@
 """A teleoperation session: the loop with a :class:`TeleopTask`, its logs, resets and summary.
 
 The session is driven by :meth:`TeleopSession.advance` (simulated seconds) from a window or a
-script (:class:`~peg_ctrl.teleop.scripted.ScriptedOperator`).
+script (:class:`~peg_ctrl.teleop.scripted.ScriptedOperator`). It writes what ``peg-sim run``
+writes: ``summary.json`` (every field of :class:`~peg_ctrl.episode.EpisodeResult`, plus the
+session's own), ``config.json`` (the simulation's part of an episode config: controller, seed,
+randomization, scene, physics; the key mapping's settings are in the log's ``teleop_start``
+record), ``log.jsonl``, the full-rate force trace ``forces.npz`` and the states at every control
+step ``states.npz`` (for ``peg-sim replay``).
+
+One clock runs through the whole session: a reset (``Z``) restores the start state but not the
+simulated time, so the logs, the force trace and the states stay in time order.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -14,13 +23,16 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
-from peg_ctrl.controllers import make_controller
-from peg_ctrl.episode import compiled_model
+from peg_ctrl.config import to_dict
+from peg_ctrl.controllers import ControllerConfig
+from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model
 from peg_ctrl.episode_log import EpisodeLogger
+from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text
 from peg_ctrl.loop import Loop, StepInfo
-from peg_ctrl.monitors import ContactMonitor
-from peg_ctrl.recorders import TraceRecorder, step_record
+from peg_ctrl.monitors import ContactMonitor, classify_end_state
+from peg_ctrl.physics import PhysicsConfig
+from peg_ctrl.recorders import StateRecorder, TraceRecorder, step_record
 from peg_ctrl.scene import HOME_KEY, SceneConfig
 from peg_ctrl.state import ControlState, PegObservation, StateReader
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
@@ -28,6 +40,9 @@ from peg_ctrl.teleop.task import TeleopTask, crossed
 from peg_ctrl.timing import control_decimation
 
 __all__ = ["TeleopSession"]
+
+# The fields of an episode config that describe a teleop session's simulation (config.json).
+_SIMULATION_FIELDS = ("controller", "seed", "randomization", "domain", "scene", "physics")
 
 
 class TeleopSession:
@@ -45,13 +60,24 @@ class TeleopSession:
     ) -> None:
         self.cfg = config or TeleopConfig()
         self.scene = scene or SceneConfig()
-        self.model = compiled_model(self.scene)
+        self.physics = "seed"  # the profile teleoperation runs in (README: physics profiles)
+        self.model = compiled_model(self.scene, self.physics)
         self.controller_name = controller
         self.seed = seed
         self.randomize = randomize
         self.out_dir = Path(out_dir)
+        ctrl_cfg = ControllerConfig.select(controller)
+        ctrl = ctrl_cfg.build(self.model)
         self.logger = EpisodeLogger(self.out_dir)
-        ctrl = make_controller(controller, self.model)
+        episode = EpisodeConfig(
+            controller=ctrl_cfg,
+            seed=seed,
+            randomization=RandomizationConfig(enabled=randomize),
+            scene=self.scene,
+            physics=PhysicsConfig(self.physics),
+        )
+        resolved = {k: v for k, v in to_dict(episode).items() if k in _SIMULATION_FIELDS}
+        atomic_write_text(self.out_dir / "config.json", _json(resolved))
         # The mapper starts at the home pose, jaw open; the task resets it on every attempt.
         home = mujoco.MjData(self.model)
         mujoco.mj_resetDataKeyframe(self.model, home, self.model.key(HOME_KEY).id)
@@ -64,13 +90,14 @@ class TeleopSession:
             self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=decimation
         )
         self.trace = TraceRecorder(self.logger, self.task.phases)
+        self.states = StateRecorder(self.out_dir / "states.npz", self.model.nq)
         self.loop = Loop(
             model=self.model,
             controller=ctrl,
             task=self.task,
             scene=self.scene,
             contact=ContactMonitor(force_spike=None),
-            recorders=[self.trace, self],
+            recorders=[self.trace, self.states, self],
         )
         self.data = self.loop.data
         self.attempt = 1
@@ -80,8 +107,15 @@ class TeleopSession:
         self.summary: dict[str, Any] = {}
         self.wall0 = time.perf_counter()
         self.loop.reset(np.random.default_rng(seed))
+        self.states.start(self.data)
         self.logger.record(
-            {"event": "teleop_start", "seed": seed, "randomize": randomize, "controller": controller}
+            {
+                "event": "teleop_start",
+                "seed": seed,
+                "randomize": randomize,
+                "controller": controller,
+                "teleop": to_dict(self.cfg),
+            }
         )
 
     # -- state --------------------------------------------------------------------------------
@@ -114,19 +148,28 @@ class TeleopSession:
                 self._reset()
                 if self.finished:
                     return
-            self.loop.step()
+            try:
+                self.loop.step()
+            except EpisodeFailure as failure:  # e.g. diverged: end with the records so far
+                self.finish(failure.reason, detail=failure.detail)
+                return
             if self.step_count >= self.cfg.max_steps:
                 self.finish("timeout")
 
     def _reset(self) -> None:
-        """Restore the start state (re-randomised from seed + attempt if enabled), SPEC §5."""
+        """Restore the start state (re-randomised from seed + attempt if enabled), SPEC §5; the
+        clock runs on."""
         self.mapper.reset_requested = False
         if self.attempt >= self.cfg.max_attempts:
             self.finish("attempts_exhausted")
             return
         self.attempt += 1
         seed = self.seed + self.attempt - 1 if self.randomize else self.seed
+        t = float(self.data.time)
         self.loop.reset(np.random.default_rng(seed))
+        self.data.time = t  # the session's clock runs on (the reset zeroed it)
+        self.task.records[-1].t_start = t
+        self.states.start(self.data)
         self._inserted_logged = False
         self.logger.record({"event": "reset", "step": self.step_count, "attempt": self.attempt})
 
@@ -146,8 +189,17 @@ class TeleopSession:
         m = self.mapper
         return {"phase": "teleop", "attempt": self.attempt, "speed": m.speed, "keys": sorted(m.held)}
 
-    def finish(self, reason: str) -> dict[str, Any]:
-        """End the session: write the episode record (same format as autonomous mode)."""
+    def finish(self, reason: str, *, detail: str = "") -> dict[str, Any]:
+        """End the session (``reason``: quit, timeout, script_done, ...): flush the force trace and
+        write ``summary.json`` with every field ``peg-sim run`` writes, plus ``attempts``, ``end``
+        (= ``reason``), ``peg_radial_m`` and ``peg_bottom_z_m``. Calling it again returns the same
+        summary.
+
+        ``total_timesteps`` and ``sim_time_s`` count every attempt, and every time [s] is on the
+        session's clock; the contact metrics are the last attempt's (a reset restarts the
+        monitors and the contact history); ``phases`` holds one record per attempt.
+        ``peg_slip_m`` is None: the operator may let go at any time, so slip is not monitored.
+        """
         if self.finished:
             return self.summary
         self.finished = True
@@ -155,26 +207,67 @@ class TeleopSession:
         check = self.task.insertion.measure(self.peg())
         inserted = self.task.inserted or self.task.insertion.criterion(check)
         self.task.finish(float(self.data.time), reason)
-        status = "success" if inserted else "failure"
+        if inserted:
+            status = "success"
+        else:
+            status = "interrupted" if reason == "interrupted" else "failure"
+        loop, contact, history = self.loop, self.loop.contact, self.loop.history
+        _, resting = loop.reader.pair_forces(self.data)
+        a = self.scene.assets
+        if inserted:
+            end_state = "seated"
+        elif math.isfinite(check.lateral_error_m):
+            end_state = classify_end_state(
+                check, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
+            )
+        else:
+            end_state = "missed"
+        tti, first = self.task.time_to_insert, history.first_contact
+        # None unless the peg touched the block before the insertion was detected (the operator
+        # may lower it in without touching, then let it fall against the bore).
+        to_seat = tti - first if tti is not None and first is not None and first <= tti else None
         self.summary = {
             "status": status,
             "reason": "" if status == "success" else reason,
             "phase": "teleop",
             "controller": self.controller_name,
             "planner": "teleop",
+            "physics": self.physics,
+            "task": self.task.name,
+            "strategy": "",
             "seed": self.seed,
             "total_timesteps": self.step_count,
             "sim_time_s": float(self.data.time),
             "wall_time_s": time.perf_counter() - self.wall0,
+            "peak_contact_force_n": contact.peak_block,
+            "peak_any_contact_force_n": contact.peak_any,
+            "insertion_depth_m": check.depth_m,
+            "lateral_error_m": check.lateral_error_m,
+            "tilt_rad": check.tilt_rad,
+            "max_penetration_m": contact.max_penetration,
+            "resting_penetration_m": max(resting),
+            "grip_penetration_m": contact.grip_penetration,
+            "peg_slip_m": None,
+            "time_to_insert_s": tti,
+            "first_contact_s": first,
+            "contact_to_seat_s": to_seat,
+            "contact_impulse_ns": history.impulse,
+            "max_tilt_rad": history.max_tilt,
+            "search_distance_m": history.travel,
+            "end_state": end_state,
+            "detail": detail or f"session ended: {reason}",
+            "log_path": str(self.logger.log_path),
+            "trace_path": str(self.logger.npz_path),
+            "plot_path": None,
+            "video_path": None,
+            "phases": [r.to_dict() for r in self.task.records],
             "attempts": self.attempt,
             "end": reason,
             "peg_radial_m": check.radial_m,
             "peg_bottom_z_m": check.bottom_z_m,
-            "peak_contact_force_n": self.loop.contact.peak_block,
-            "log_path": str(self.logger.log_path),
-            "trace_path": str(self.logger.npz_path),
         }
         self.trace.flush()
+        self.states.close()
         self.logger.close({"event": "end", **self.summary})
         atomic_write_text(self.out_dir / "summary.json", _json(self.summary))
         return self.summary

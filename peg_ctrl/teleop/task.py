@@ -62,6 +62,7 @@ class TeleopTask:
         )
         self.step_count = 0  # physics steps over all attempts
         self.inserted = False
+        self.time_to_insert: float | None = None  # when this attempt's insertion was detected [s]
         self.last_check: InsertionMeasure | None = None
         self.records: list[PhaseRecord] = []
         self._dt = 0.0
@@ -75,6 +76,7 @@ class TeleopTask:
         self._dt = self.decimation * float(model.opt.timestep)
         self.mapper.reset_command()
         self.inserted = False
+        self.time_to_insert = None
 
     def start(self, obs: Observation) -> None:
         self.records.append(PhaseRecord("teleop", obs.t))
@@ -88,7 +90,9 @@ class TeleopTask:
         self.step_count += self.decimation
         if crossed(before, self.step_count, self.cfg.check_every):
             self.last_check = self.insertion.measure(obs.peg)
-            self.inserted = self.inserted or self.insertion.criterion(self.last_check)
+            if not self.inserted and self.insertion.criterion(self.last_check):
+                self.inserted = True
+                self.time_to_insert = obs.t
         return _RUNNING
 
     def finish(self, t: float, outcome: str) -> None:

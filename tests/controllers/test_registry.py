@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
+from typing import ClassVar
 
 import mujoco
 import pytest
@@ -159,3 +160,32 @@ def test_imports_first_in_a_fresh_interpreter_without_higher_layers(module: str)
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stderr
+
+
+def test_register_controller_adds_a_name_and_refuses_clashes(monkeypatch: pytest.MonkeyPatch) -> None:
+    from peg_ctrl.controllers import register_controller
+
+    monkeypatch.setattr("peg_ctrl.controllers.REGISTRY", dict(REGISTRY))
+    from peg_ctrl import controllers
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class SoftPD(PDConfig):
+        name: ClassVar[str] = "soft_pd"
+        kp_pos: float = 500.0
+
+    register_controller(SoftPD)
+    assert controllers.REGISTRY["soft_pd"] is SoftPD
+    cfg = ControllerConfig.select({"name": "soft_pd"})
+    assert isinstance(cfg, SoftPD) and cfg.kp_pos == 500.0
+    register_controller(SoftPD)  # the same class again: no change
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Other(PDConfig):
+        name: ClassVar[str] = "pd"
+
+    with pytest.raises(ConfigError, match="the name 'pd' is taken by PDConfig"):
+        register_controller(Other)
+    register_controller(Other, replace=True)
+    assert controllers.REGISTRY["pd"] is Other
+    with pytest.raises(ConfigError, match="expected a ControllerConfig subclass"):
+        register_controller(dict)  # type: ignore[arg-type]
