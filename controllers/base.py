@@ -21,7 +21,7 @@ from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
 import mujoco
 import numpy as np
 
-from peg_ctrl.commands import GripperTarget
+from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownComponent
 from peg_ctrl.jaw import JawCalibration, load_default
 from peg_ctrl.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
@@ -153,6 +153,25 @@ def check_target(target: GripperTarget) -> None:
             f"omega_body={target.omega_body.tolist()}, jaw_sep_m={target.jaw_sep_m}, "
             f"force_world={target.force_world.tolist()}"
         )
+
+
+def _check_pose(target: GripperTarget) -> None:
+    """Raise :class:`CommandError` for a jaw separation outside [0, 0.085] m or a quaternion that
+    is not of unit norm (a NaN in either included): the checks ``GripperTarget.trusted`` skips,
+    which the control laws would otherwise clip or read as no rotation. Plain floats: every
+    control step runs it."""
+    w, x, y, z = target.quat_world.tolist()
+    norm_sq = w * w + x * x + y * y + z * z
+    jaw = target.jaw_sep_m
+    if not (0.0 <= jaw <= JAW_SEP_MAX_M and abs(norm_sq - 1.0) <= _UNIT_TOLERANCE):
+        if not 0.0 <= jaw <= JAW_SEP_MAX_M:
+            raise CommandError(f"target jaw_sep_m must be in [0, {JAW_SEP_MAX_M}] m, got {jaw!r}")
+        raise CommandError(
+            f"target quat_world must be a unit quaternion, got {[w, x, y, z]} (norm {math.sqrt(norm_sq):.6g})"
+        )
+
+
+_UNIT_TOLERANCE = 1e-6  # on the squared norm of a target quaternion
 
 
 # -- configs -----------------------------------------------------------------------------------
@@ -346,6 +365,7 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
             DivergenceError: if the control is non-finite otherwise (a diverged state).
         """
         t0 = time.perf_counter()
+        _check_pose(target)
         effort = self.control_law(state, target)
         force, torque = effort.force_world, effort.torque_body
         jaw_sep = float(target.jaw_sep_m)

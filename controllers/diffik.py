@@ -150,7 +150,8 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
             try:
                 self._v = self.ik_velocity(self._q, target)
                 status = "ok"
-            except Exception as exc:  # a failed QP holds the setpoint; reported in diagnostics
+            except self._mink.exceptions.NoSolutionFound as exc:  # the QP solver's own failure:
+                # hold the setpoint, reported in the diagnostics; any other error propagates
                 self._v = np.zeros(self.robot.nv)
                 status = f"qp_failed: {type(exc).__name__}"
             self.configuration.update(self._q)

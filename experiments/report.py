@@ -17,9 +17,18 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.experiments.stats import ALPHA, compare_arms, episodes_frame, median_ci, wilson_interval
+from peg_ctrl.io import atomic_path, atomic_write_text
 from peg_ctrl.monitors import FIRST_CONTACT_N
 
-__all__ = ["wilson_interval", "summarise", "write_report", "read_rows", "arm_of", "swept_conditions"]
+__all__ = [
+    "wilson_interval",
+    "summarise",
+    "write_report",
+    "read_rows",
+    "episodes_csv_problem",
+    "arm_of",
+    "swept_conditions",
+]
 
 # Swept episode fields with a readable axis: column -> (label, factor from the column's unit).
 _CONDITION_LABELS = {
@@ -116,6 +125,73 @@ def read_rows(out_dir: Path) -> list[dict[str, Any]]:
         return list(csv.DictReader(fh))
 
 
+# Columns the report cannot be drawn without, and the ones it reads as numbers.
+_REQUIRED_COLUMNS = (
+    "key",
+    "controller",
+    "planner",
+    "clearance_m",
+    "status",
+    "reason",
+    "peak_contact_force_n",
+    "time_to_insert_s",
+)
+_NUMBER_COLUMNS = ("clearance_m", "peak_contact_force_n", "time_to_insert_s", "contact_to_seat_s")
+_STATUSES = ("success", "failure")
+
+
+def episodes_csv_problem(path: Path) -> str | None:
+    """What makes ``path`` (an ``episodes.csv``) unusable for a report, in a few words, or None.
+
+    Found: a missing, unreadable, empty or non-text file; NUL bytes (a torn write); a file cut
+    off (its last line has no line end, or a row has fewer fields than the header); a row with
+    more fields; a column the report needs missing; a status other than success or failure; a
+    metric that is not a number.
+    """
+    import io
+
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        return "does not exist"
+    except OSError as exc:
+        return f"cannot be read: {exc.strerror or exc}"
+    except UnicodeDecodeError as exc:
+        return f"is not text (byte {exc.start} is not UTF-8)"
+    if not text:
+        return "is empty"
+    if "\0" in text:  # a torn write after a crash leaves zero-filled blocks
+        line = text.count("\n", 0, text.index("\0")) + 1
+        return f"is damaged: line {line} holds NUL bytes"
+    if not text.endswith("\n"):
+        last = text.count("\n") + 1
+        return f"is cut off: its last line ({last}) has no line end"
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader)
+        missing = [name for name in _REQUIRED_COLUMNS if name not in header]
+        if missing:
+            return f"has no column {', '.join(missing)} (line 1)"
+        numbers = [(header.index(name), name) for name in _NUMBER_COLUMNS if name in header]
+        status = header.index("status")
+        for fields in reader:
+            line = reader.line_num
+            if len(fields) < len(header):
+                return f"is cut off or damaged: line {line} has {len(fields)} of {len(header)} fields"
+            if len(fields) > len(header):
+                return f"is damaged: line {line} has {len(fields)} fields, the header {len(header)}"
+            if fields[status] not in _STATUSES:
+                return f"is damaged: line {line} has status {fields[status]!r} (not success or failure)"
+            for i, name in numbers:
+                try:
+                    float(fields[i] or 0.0)
+                except ValueError:
+                    return f"is damaged: line {line} has {name} {fields[i]!r} (not a number)"
+    except csv.Error as exc:
+        return f"is damaged: line {reader.line_num}: {exc}"
+    return None
+
+
 def swept_conditions(df: Any) -> list[str]:
     """The columns of an :func:`~peg_ctrl.experiments.stats.episodes_frame` that the experiment
     varies and that success can be plotted against: the clearance, every grid key (dotted
@@ -182,8 +258,11 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
 def _save(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp)
+    finally:
+        plt.close(fig)
 
 
 def _episode_dir(out_dir: Path, log_path: Any) -> Path:
@@ -653,5 +732,5 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
     for title, name in plots:
         parts += [f"## {title}", "", _CAPTIONS.get(name, ""), "", f"![{title}]({name})", ""]
     path = out_dir / "report.md"
-    path.write_text("\n".join(parts))
+    atomic_write_text(path, "\n".join(parts))
     return path

@@ -18,20 +18,21 @@ those files in the experiment's fixed job order, so the number of workers does n
 from __future__ import annotations
 
 import concurrent.futures as futures
+import contextlib
 import dataclasses
 import json
-import multiprocessing
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Generator
 from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import to_dict
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
-from peg_ctrl.io import atomic_write_text
+from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_stale_temps, to_json
+from peg_ctrl.workers import worker_pool
 
-__all__ = ["run_sweep", "collect_rows", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
+__all__ = ["run_sweep", "collect_rows", "refresh_tables", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
 
 # episodes.csv columns copied from each episode's summary.json.
 _SUMMARY_COLUMNS = (
@@ -111,9 +112,8 @@ def bench_sweep(n_episodes: int = 6, *, workers: tuple[int, ...] = (1, 2)) -> di
     exp = experiment_from_mapping({"name": "bench", "controllers": ["pd"], "seeds": n_episodes})
     jobs = expand(exp)
     times: dict[int, float] = {}
-    ctx = multiprocessing.get_context("spawn")
     for n in workers:
-        with tempfile.TemporaryDirectory() as tmp, futures.ProcessPoolExecutor(n, mp_context=ctx) as pool:
+        with tempfile.TemporaryDirectory() as tmp, worker_pool(n) as pool:
             list(pool.map(_warm_up, [job_config_mapping(jobs[0])] * n))
             tasks = [(j.key, job_config_mapping(j), str(Path(tmp) / j.key)) for j in jobs]
             t0 = time.perf_counter()
@@ -131,31 +131,38 @@ def bench_sweep(n_episodes: int = 6, *, workers: tuple[int, ...] = (1, 2)) -> di
 
 
 def _done(out: Path) -> bool:
+    """Whether the episode in ``out`` finished: its final summary is there. The first summary,
+    written the moment the episode ends, still points at ``forces.partial``; the final one,
+    written once the trace and states are packed, at ``forces.npz``. An episode killed in
+    between runs again."""
     path = out / "summary.json"
     if not path.is_file():
         return False
     try:
-        return json.loads(path.read_text()).get("status") in ("success", "failure")
-    except json.JSONDecodeError:
+        summary = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
         return False
+    return summary.get("status") in ("success", "failure") and not str(
+        summary.get("trace_path", "")
+    ).endswith(".partial")
 
 
-def _local_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int) -> Iterable[dict[str, Any]]:
-    ctx = multiprocessing.get_context("spawn")
-    with futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+# A backend's results as they finish; closed early, it stops its work.
+_Stream = Generator[dict[str, Any], None, None]
+
+
+def _local_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int) -> _Stream:
+    # Closing this generator early (Ctrl-C, an error) ends the workers and starts no queued
+    # episode; they also die with this process (peg_ctrl.workers).
+    if not tasks:
+        return
+    with worker_pool(min(workers, len(tasks))) as pool:
         pending = [pool.submit(_run_one, t) for t in tasks]
-        try:
-            for fut in futures.as_completed(pending):
-                yield fut.result()
-        except BaseException:
-            for fut in pending:
-                fut.cancel()
-            raise
+        for fut in futures.as_completed(pending):
+            yield fut.result()
 
 
-def _ray_backend(
-    tasks: list[tuple[str, dict[str, Any], str]], workers: int, address: str | None
-) -> Iterable[dict[str, Any]]:
+def _ray_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int, address: str | None) -> _Stream:
     try:
         import ray
     except ImportError:
@@ -171,7 +178,7 @@ def _ray_backend(
         yield ray.get(ready[0])
 
 
-BACKENDS: dict[str, Callable[..., Iterable[dict[str, Any]]]] = {
+BACKENDS: dict[str, Callable[..., _Stream]] = {
     "local": _local_backend,
     "ray": _ray_backend,
 }
@@ -187,9 +194,16 @@ def run_sweep(
     progress: bool = True,
     report: bool = True,
 ) -> list[dict[str, Any]]:
-    """Run (or resume) ``exp`` into ``out_dir``; returns one row per episode, in job order."""
-    from peg_ctrl.progress import progress_bar
+    """Run (or resume) ``exp`` into ``out_dir``; returns one row per episode, in job order.
 
+    ``out_dir`` is locked while the sweep runs (:func:`~peg_ctrl.io.lock_output_dir`). Ctrl-C
+    (or any exception) cancels the episodes not started and ends the running ones, which run
+    again on resume; the finished episodes' tables are written either way.
+
+    Raises:
+        OutputInUse: another process is running a sweep (or a run) in ``out_dir``.
+        ConfigError: ``out_dir`` holds another experiment, or an argument is invalid.
+    """
     if backend not in BACKENDS:
         raise UnknownComponent("backend", backend, BACKENDS)
     if workers < 1:
@@ -197,8 +211,27 @@ def run_sweep(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = expand(exp)  # before anything is written: a bad experiment leaves nothing behind
+    with lock_output_dir(out_dir):
+        remove_stale_temps(out_dir)  # left by a sweep killed while writing its tables or plots
+        return _sweep(exp, jobs, out_dir, workers, backend, address, progress=progress, report=report)
+
+
+def _sweep(
+    exp: ExperimentConfig,
+    jobs: list[Job],
+    out_dir: Path,
+    workers: int,
+    backend: str,
+    address: str | None,
+    *,
+    progress: bool,
+    report: bool,
+) -> list[dict[str, Any]]:
+    """:func:`run_sweep` in the locked ``out_dir``."""
+    from peg_ctrl.progress import progress_bar
+
     saved = out_dir / "experiment.json"
-    resolved = json.dumps(to_dict(exp), indent=2, sort_keys=True) + "\n"
+    resolved = to_json(to_dict(exp), indent=2, sort_keys=True) + "\n"
     if saved.is_file() and saved.read_text() != resolved:
         raise ConfigError(
             f"{out_dir} holds results of a different experiment; use another --out or delete it"
@@ -218,10 +251,13 @@ def run_sweep(
             successes = 0
             runner = BACKENDS[backend]
             stream = runner(tasks, workers, address) if backend == "ray" else runner(tasks, workers)
-            for result in stream:
-                successes += result["status"] == "success"
-                bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
-                bar.update(1)
+            # closing(): an exception here reaches the backend now (it ends its workers), not
+            # whenever the suspended generator is collected.
+            with contextlib.closing(stream):
+                for result in stream:
+                    successes += result["status"] == "success"
+                    bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
+                    bar.update(1)
     finally:
         # Whatever stopped the sweep (Ctrl-C, a crashed worker), the finished episodes' tables
         # are written; the report only for a complete sweep.
@@ -265,6 +301,65 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
     return rows
 
 
+def _rows_from_summaries(out_dir: Path) -> tuple[list[dict[str, Any]], int] | str:
+    """The rows :func:`collect_rows` makes from ``out_dir``'s saved experiment and episode
+    summaries, and the number of jobs; or why they cannot be made."""
+    from peg_ctrl.experiments.config import experiment_from_mapping
+
+    saved = out_dir / "experiment.json"
+    if not saved.is_file():
+        return f"there is no {saved}"
+    try:
+        jobs = expand(experiment_from_mapping(json.loads(saved.read_text())))
+        rows = collect_rows(jobs, out_dir)
+    except (OSError, ValueError) as exc:  # ConfigError, JSONDecodeError, UnicodeDecodeError
+        return f"{saved} cannot be used: {' '.join(str(exc).split())}"
+    except KeyError as exc:
+        return f"an episode summary in {out_dir / 'episodes'} has no field {exc}"
+    if not rows:
+        return f"no episode in {out_dir / 'episodes'} has finished"
+    return rows, len(jobs)
+
+
+def refresh_tables(out_dir: Path) -> list[str]:
+    """Make ``out_dir``'s tables fit to draw a report from (``peg-sim plot``): when
+    ``episodes.csv`` is missing, cut off, damaged or behind the episodes' ``summary.json`` files
+    (a sweep killed before it wrote its tables), rebuild the tables from those summaries.
+
+    Returns:
+        Notes for the user: what was rebuilt and why, and how many of the experiment's episodes
+        the report covers when the sweep is not finished. Empty when there is nothing to say.
+
+    Raises:
+        ConfigError: ``episodes.csv`` is unusable and there are no summaries to rebuild it from;
+            the message names the file and both problems.
+    """
+    from peg_ctrl.experiments.report import episodes_csv_problem, read_rows
+
+    out_dir = Path(out_dir)
+    table = out_dir / "episodes.csv"
+    problem = episodes_csv_problem(table)
+    found = _rows_from_summaries(out_dir)
+    if isinstance(found, str):
+        if problem is None:
+            return []  # the table alone (its episodes' directories may have been pruned)
+        raise ConfigError(f"{table} {problem}, and it cannot be rebuilt: {found}")
+    rows, n_jobs = found
+    notes = []
+    if problem is None:
+        have = {row["key"] for row in read_rows(out_dir)}
+        behind = sum(row["key"] not in have for row in rows)
+        if behind:
+            problem = f"is behind the episode summaries ({behind} finished episodes are not in it)"
+    if problem is not None:
+        write_tables(rows, out_dir)
+        notes.append(f"{table} {problem}: rebuilt the tables from {len(rows)} episode summaries")
+        have = {row["key"] for row in rows}
+    if len(have) < n_jobs:
+        notes.append(f"{len(have)} of {n_jobs} episodes have finished: the report covers those")
+    return notes
+
+
 def columns(rows: list[dict[str, Any]]) -> list[str]:
     """:data:`EPISODE_COLUMNS` and the experiment's grid keys (``task.lateral_error``, ...)."""
     extra = [k for k in (rows[0] if rows else {}) if k not in EPISODE_COLUMNS]
@@ -272,29 +367,35 @@ def columns(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
-    """``episodes.csv``, ``episodes.parquet`` and ``summary.csv``."""
+    """``episodes.csv``, ``episodes.parquet`` and ``summary.csv``, each written atomically. An
+    undefined value (None: a metric of a peg that never got to the hole) is an empty cell in the
+    CSV files and a null in the parquet file."""
     import csv
+    import io
 
     from peg_ctrl.experiments.report import summarise
 
     names = columns(rows)
-    with open(out_dir / "episodes.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=names)
-        writer.writeheader()
-        # wall time varies run to run; everything else is deterministic
-        for row in rows:
-            writer.writerow({k: ("" if row[k] is None else row[k]) for k in names})
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=names)
+    writer.writeheader()
+    # wall time varies run to run; everything else is deterministic
+    for row in rows:
+        writer.writerow({k: ("" if row[k] is None else row[k]) for k in names})
+    atomic_write_text(out_dir / "episodes.csv", text.getvalue())
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         table = pa.Table.from_pylist([{k: row[k] for k in names} for row in rows])
-        pq.write_table(table, out_dir / "episodes.parquet")
+        with atomic_path(out_dir / "episodes.parquet") as tmp:
+            pq.write_table(table, tmp)
     except ImportError:  # pragma: no cover - pyarrow is a dependency
         pass
     summary = summarise(rows)
-    with open(out_dir / "summary.csv", "w", newline="") as fh:
-        if summary:
-            writer = csv.DictWriter(fh, fieldnames=list(summary[0]))
-            writer.writeheader()
-            writer.writerows(summary)
+    text = io.StringIO(newline="")
+    if summary:
+        writer = csv.DictWriter(text, fieldnames=list(summary[0]))
+        writer.writeheader()
+        writer.writerows(summary)
+    atomic_write_text(out_dir / "summary.csv", text.getvalue())

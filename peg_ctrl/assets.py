@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.errors import OutputError
+from peg_ctrl.io import to_json
 
 __all__ = [
     "AssetParams",
@@ -326,7 +327,7 @@ def write_assets(params: AssetParams, directory: Path) -> dict[str, Path]:
         files[name] = directory / f"{name}.stl"
         write_stl(part, files[name])
     meta = directory / "params.json"
-    meta.write_text(json.dumps(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n")
+    meta.write_text(_params_json(params))  # in a staging directory, published by a rename
     return files
 
 
@@ -353,7 +354,7 @@ def _mesh_names(params: AssetParams) -> list[str]:
 
 
 def _params_json(params: AssetParams) -> str:
-    return json.dumps(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
+    return to_json(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
 
 
 def _is_complete(directory: Path, params: AssetParams) -> bool:

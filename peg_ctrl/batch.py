@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import concurrent.futures as futures
-import multiprocessing
 import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import to_dict
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.workers import worker_pool
 
 __all__ = ["run_batch", "default_workers"]
 
@@ -34,15 +35,23 @@ def run_batch(
     progress: bool = True,
     desc: str = "episodes",
 ) -> list[dict[str, Any]]:
-    """Run ``(EpisodeConfig, out_dir)`` jobs on ``workers`` processes; summaries in job order."""
+    """Run ``(EpisodeConfig, out_dir)`` jobs on ``workers`` processes (default: one per core);
+    summaries in job order. Workers die with this process, and a Ctrl-C ends them and starts no
+    queued job (see :mod:`peg_ctrl.workers`).
+
+    Raises:
+        ConfigError: ``workers`` is below 1 (0 is refused, not taken as "the default").
+    """
     from peg_ctrl.progress import progress_bar
 
+    if workers is not None and workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
     # Configs travel as plain data and are validated again in the worker.
     items = [(to_dict(cfg), str(out), plot) for cfg, out in jobs]
-    workers = workers or default_workers()
+    if not items:
+        return []
     results: list[dict[str, Any] | None] = [None] * len(items)
-    ctx = multiprocessing.get_context("spawn")
-    with futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with worker_pool(min(workers or default_workers(), len(items))) as pool:
         pending = {pool.submit(_worker, item): i for i, item in enumerate(items)}
         successes = 0
         with progress_bar(total=len(items), desc=desc, unit="ep", enabled=progress) as bar:

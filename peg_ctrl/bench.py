@@ -22,7 +22,6 @@ Overhead = loop time / replay time - 1, the median of the paired ratios of the r
 from __future__ import annotations
 
 import copy
-import json
 import platform
 import statistics
 import tempfile
@@ -304,7 +303,7 @@ def run_benchmarks(
 ) -> dict[str, Any]:
     """Run the benchmarks and write JSON to ``out``; a progress bar counts the repetitions of
     every task x controller x control period (see :mod:`peg_ctrl.progress`) when ``progress``."""
-    from peg_ctrl.io import atomic_write_text
+    from peg_ctrl.io import atomic_write_text, to_json
     from peg_ctrl.progress import progress_bar
 
     cases = [(t, c, dt) for t in tasks for c in controllers for dt in control_dts or [None]]
@@ -330,5 +329,5 @@ def run_benchmarks(
         "throughput": bench_throughput(episodes=throughput_episodes) if throughput else [],
         "physics_profiles": bench_profiles(repeats=repeats, progress=progress) if physics else None,
     }
-    atomic_write_text(out, json.dumps(results, indent=2) + "\n")
+    atomic_write_text(out, to_json(results, indent=2) + "\n")
     return results

@@ -13,7 +13,9 @@ Exit codes, decided in one place (:func:`main`):
 Any other exception is a bug and keeps its traceback.
 
 Every command that takes ``--out`` checks it (created, writable) after validating its arguments
-and before any work starts.
+and before any work starts. A command that writes a directory (``run``, ``teleop``, ``sweep``,
+``validity``, ``validate-profile``, ``plot``) locks it while it works
+(:func:`peg_ctrl.io.lock_output_dir`): a second one on the same directory is refused (exit 2).
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Iterator, Sequence
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -29,11 +32,18 @@ from peg_ctrl.errors import (
     USER_ERRORS,
     ConfigError,
     DivergenceError,
+    OutputWarning,
     PegCtrlError,
     PlanningError,
     UnknownComponent,
 )
-from peg_ctrl.io import atomic_write_text, prepare_output_dir, prepare_output_file
+from peg_ctrl.io import (
+    atomic_write_text,
+    lock_output_dir,
+    prepare_output_dir,
+    prepare_output_file,
+    to_json,
+)
 from peg_ctrl.progress import ENV_VAR
 
 __all__ = ["main"]
@@ -197,22 +207,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             control_decimation(dt, PROFILES[args.profile].timestep)
     out = prepare_output_file(args.out)
     if args.physics:
-        import json
-
         from peg_ctrl.bench import bench_profiles
 
         result = bench_profiles(repeats=args.repeats)
-        atomic_write_text(out, json.dumps(result, indent=2) + "\n")
+        atomic_write_text(out, to_json(result, indent=2) + "\n")
         _print_profiles(result)
         print(f"wrote {out}")
         return 0
     if args.sweep:
-        import json
-
         from peg_ctrl.experiments.runner import bench_sweep
 
         result = bench_sweep(args.sweep_episodes)
-        atomic_write_text(out, json.dumps(result, indent=2) + "\n")
+        atomic_write_text(out, to_json(result, indent=2) + "\n")
         print(
             f"sweep of {result['episodes']} episodes: 1 worker {result['wall_s']['1']:.1f} s, "
             f"2 workers {result['wall_s']['2']:.1f} s, speedup {result['speedup_2_vs_1']:.2f}x; wrote {out}"
@@ -278,11 +284,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
             "randomization.enabled in the config) and the config's domain has no ranges or noise; "
             "add --randomize"
         )
-    out = prepare_output_dir(args.out)
-    if args.viewer:
-        result = _run_with_viewer(cfg, out)
-    else:
-        result = run_episode(cfg, out, video=args.video)
+    with lock_output_dir(prepare_output_dir(args.out)) as out:
+        if args.viewer:
+            result = _run_with_viewer(cfg, out)
+        else:
+            result = run_episode(cfg, out, video=args.video)
     print(result.one_line())
     print(f"wrote {out / 'summary.json'}")
     return 0 if result.status == "success" else EXIT_FAILED
@@ -319,7 +325,7 @@ def _run_with_viewer(cfg, out: Path):  # type: ignore[no-untyped-def]
 
 
 def _cmd_teleop(args: argparse.Namespace) -> int:
-    from peg_ctrl.teleop import SCRIPTED_INSERTION, SPEED_RANGE, ScriptedOperator, TeleopSession
+    from peg_ctrl.teleop import SPEED_RANGE
 
     lo, hi = SPEED_RANGE
     if not lo <= args.speed <= hi:
@@ -330,7 +336,20 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
         raise ConfigError("--seed only changes the peg's start pose with --randomize; add --randomize")
     if not args.scripted and not os.environ.get("DISPLAY"):
         raise ConfigError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
-    out = prepare_output_dir(args.out)
+    with lock_output_dir(prepare_output_dir(args.out)) as out:
+        summary = _teleop(args, out)
+    inserted = "inserted" if summary["status"] == "success" else "not inserted"
+    print(
+        f"teleop ended ({summary['end']}): {inserted}, {summary['total_timesteps']} steps, "
+        f"{summary['attempts']} attempt(s); wrote {out / 'summary.json'}"
+    )
+    return 0
+
+
+def _teleop(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+    """A teleop session in the (locked) directory ``out``; returns its summary."""
+    from peg_ctrl.teleop import SCRIPTED_INSERTION, ScriptedOperator, TeleopSession
+
     seed = args.seed if args.seed is not None else 0
     session = TeleopSession(out, controller=args.controller, seed=seed, randomize=args.randomize)
     session.mapper.set_speed(args.speed)
@@ -340,21 +359,14 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             session.finish("interrupted")  # keep the records so far; main() exits with 130
             raise
-        summary = session.finish("script_done")
-    else:
-        from peg_ctrl.teleop_window import WindowUnavailable, run_window
+        return session.finish("script_done")
+    from peg_ctrl.teleop_window import WindowUnavailable, run_window
 
-        try:
-            summary = run_window(session, screenshot=Path(args.screenshot) if args.screenshot else None)
-        except WindowUnavailable:
-            session.finish("no_window")
-            raise
-    inserted = "inserted" if summary["status"] == "success" else "not inserted"
-    print(
-        f"teleop ended ({summary['end']}): {inserted}, {summary['total_timesteps']} steps, "
-        f"{summary['attempts']} attempt(s); wrote {out / 'summary.json'}"
-    )
-    return 0
+    try:
+        return run_window(session, screenshot=Path(args.screenshot) if args.screenshot else None)
+    except WindowUnavailable:
+        session.finish("no_window")
+        raise
 
 
 def shipped_experiments() -> dict[str, Path]:
@@ -409,10 +421,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
     data = apply_experiment_overrides(read_mapping(path), args.set or [])
     exp = experiment_from_mapping(data, default_name=path.stem)
-    workers = args.workers or default_workers()
+    workers = args.workers if args.workers is not None else default_workers()
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     out = prepare_output_dir(args.out if args.out else Path("runs") / exp.name)
+    # run_sweep locks out (Python callers get the same protection)
     rows = run_sweep(exp, out, workers=workers, backend=args.backend, address=args.address)
     wins = sum(r["status"] == "success" for r in rows)
     print(f"{exp.name}: {wins}/{len(rows)} episodes inserted; wrote {out / 'report.md'}")
@@ -427,8 +440,8 @@ def _cmd_validity(args: argparse.Namespace) -> int:
         raise ConfigError(f"--trials must be >= 1, got {args.trials}")
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
-    out = prepare_output_dir(args.out)
-    print(f"wrote {run_battery(out, profiles, trials=args.trials, seed=args.seed)}")
+    with lock_output_dir(prepare_output_dir(args.out)) as out:
+        print(f"wrote {run_battery(out, profiles, trials=args.trials, seed=args.seed)}")
     return 0
 
 
@@ -441,10 +454,10 @@ def _cmd_validate_profile(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seeds must be >= 2, got {args.seeds}")
     if args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
-    out = prepare_output_dir(args.out or f"runs/validate-{args.profile}")
-    result = validate_profile(
-        args.profile, out, reference=args.reference, seeds=args.seeds, workers=args.workers
-    )
+    with lock_output_dir(prepare_output_dir(args.out or f"runs/validate-{args.profile}")) as out:
+        result = validate_profile(
+            args.profile, out, reference=args.reference, seeds=args.seeds, workers=args.workers
+        )
     print((out / "validation.md").read_text(), end="")
     print(f"wrote {out / 'validation.json'} and {out / 'validation.md'}")
     return 0 if result["passed"] else 1
@@ -460,11 +473,16 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from peg_ctrl.experiments.report import write_report
+    from peg_ctrl.experiments.runner import refresh_tables
 
     out = Path(args.dir)
-    if not (out / "episodes.csv").is_file():
+    if not (out / "episodes.csv").is_file() and not (out / "experiment.json").is_file():
         raise ConfigError(f"{out} has no episodes.csv (run peg-sim sweep first)")
-    print(f"wrote {write_report(out)}")
+    with lock_output_dir(out):
+        # A cut-off or stale episodes.csv is rebuilt from the episode summaries, or refused.
+        for note in refresh_tables(out):
+            print(note)
+        print(f"wrote {write_report(out)}")
     return 0
 
 
@@ -739,7 +757,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "plot",
         help="redraw a sweep's plots and report.md",
-        description="Redraw the plots and report.md of a sweep from the episodes.csv it saved in DIR.",
+        description="Redraw the plots and report.md of a sweep from the episodes.csv it saved in DIR. "
+        "An episodes.csv that is missing, cut off or behind the episodes (a killed sweep) is first "
+        "rebuilt from DIR/episodes/*/summary.json, and refused when that is not possible.",
     )
     p.add_argument("dir", metavar="DIR", help="a sweep's output directory")
     p.set_defaults(func=_cmd_plot)
@@ -756,13 +776,28 @@ def _choose_gl_backend() -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+def _one_line_warning(default: Callable[..., None]) -> Callable[..., None]:
+    """A ``warnings.showwarning`` that prints an :class:`~peg_ctrl.errors.OutputWarning` (a plot
+    or video not written) as one ``peg-sim: warning: ...`` line, and others as ``default`` does."""
+
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, OutputWarning):
+            print(f"peg-sim: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            default(message, category, *args, **kwargs)
+
+    return show
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``peg-sim`` with ``argv`` (default: the process's arguments); returns the exit code."""
     _choose_gl_backend()
     parser = _parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(warnings.showwarning)
+            return int(args.func(args))
     except KeyboardInterrupt:
         print("peg-sim: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -17,6 +17,8 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from peg_ctrl.errors import CommandError
+
 __all__ = [
     "JAW_SEP_MAX_M",
     "COMMAND_FIELDS",
@@ -90,19 +92,24 @@ class GripperTarget:
             ("omega_body", 3),
             ("force_world", 3),
         ):
-            value = np.array(getattr(self, name), dtype=float)  # a private, read-only copy
+            try:
+                value = np.array(getattr(self, name), dtype=float)  # a private, read-only copy
+            except (TypeError, ValueError):
+                raise CommandError(
+                    f"GripperTarget.{name} must be {size} numbers, got {getattr(self, name)!r}"
+                ) from None
             value.setflags(write=False)
             if value.shape != (size,):
-                raise ValueError(f"GripperTarget.{name} must have shape ({size},), got {value.shape}")
+                raise CommandError(f"GripperTarget.{name} must have shape ({size},), got {value.shape}")
             if not np.all(np.isfinite(value)):
-                raise ValueError(f"GripperTarget.{name} must be finite, got {value.tolist()}")
+                raise CommandError(f"GripperTarget.{name} must be finite, got {value.tolist()}")
             object.__setattr__(self, name, value)
         norm = float(np.linalg.norm(self.quat_world))
         if abs(norm - 1.0) > 1e-6:
-            raise ValueError(f"GripperTarget.quat_world must be a unit quaternion, norm is {norm:.6g}")
+            raise CommandError(f"GripperTarget.quat_world must be a unit quaternion, norm is {norm:.6g}")
         _check_jaw(self.jaw_sep_m)
         if np.any(np.abs(self.p_world) > POSITION_LIMIT_M):
-            raise ValueError(
+            raise CommandError(
                 f"GripperTarget.p_world {self.p_world.tolist()} is outside the slide range "
                 f"[-{POSITION_LIMIT_M}, {POSITION_LIMIT_M}] m"
             )
@@ -163,8 +170,9 @@ class GripperTarget:
 
 
 def _check_jaw(jaw_sep_m: float) -> None:
-    if not (math.isfinite(jaw_sep_m) and 0.0 <= jaw_sep_m <= JAW_SEP_MAX_M):
-        raise ValueError(f"jaw_sep_m must be in [0, {JAW_SEP_MAX_M}] m, got {jaw_sep_m!r}")
+    number = isinstance(jaw_sep_m, (int, float, np.floating, np.integer)) and not isinstance(jaw_sep_m, bool)
+    if not (number and math.isfinite(jaw_sep_m) and 0.0 <= jaw_sep_m <= JAW_SEP_MAX_M):
+        raise CommandError(f"jaw_sep_m must be in [0, {JAW_SEP_MAX_M}] m, got {jaw_sep_m!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,15 +190,18 @@ def command_to_target(u: Sequence[float], *, frame: TaskFrame = WORLD) -> Grippe
     """Validate a command vector ``[x, y, z, roll, pitch, yaw, jaw_sep_m]`` and express it in the world.
 
     Raises:
-        ValueError: wrong length, a non-finite entry (named), a jaw separation outside
-            [0, 0.085] m, or a position outside the slide range.
+        CommandError (a ValueError): not numbers, wrong length, a non-finite entry (named), a
+            jaw separation outside [0, 0.085] m, or a position outside the slide range.
     """
-    values = np.asarray(u, dtype=float).reshape(-1)
+    try:
+        values = np.asarray(u, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise CommandError(f"command must be 7 numbers {list(COMMAND_FIELDS)}, got {u!r}") from None
     if values.shape != (7,):
-        raise ValueError(f"command must have 7 entries {list(COMMAND_FIELDS)}, got {values.shape[0]}")
+        raise CommandError(f"command must have 7 entries {list(COMMAND_FIELDS)}, got {values.shape[0]}")
     for name, value in zip(COMMAND_FIELDS, values, strict=True):
         if not math.isfinite(value):
-            raise ValueError(f"command entry {name!r} must be finite, got {value!r}")
+            raise CommandError(f"command entry {name!r} must be finite, got {value!r}")
     _check_jaw(float(values[6]))
     quat_task = euler_to_quat(*values[3:6])
     p_world = values[:3].copy()

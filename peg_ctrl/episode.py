@@ -17,9 +17,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
-import json
 import math
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,8 +31,8 @@ from peg_ctrl.config import ConfigError, load, to_dict
 from peg_ctrl.controllers import PDConfig
 from peg_ctrl.controllers.base import ControllerConfig
 from peg_ctrl.episode_log import EpisodeLogger
-from peg_ctrl.errors import FAILURE_REASONS
-from peg_ctrl.io import atomic_write_text
+from peg_ctrl.errors import FAILURE_REASONS, OutputError, OutputWarning
+from peg_ctrl.io import atomic_write_text, remove_stale_temps, to_json
 from peg_ctrl.jaw import load_default
 from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
 from peg_ctrl.monitors import ContactMonitor, GraspMonitor
@@ -176,9 +176,11 @@ class EpisodeResult:
     wall_time_s: float
     peak_contact_force_n: float  # peg-block
     peak_any_contact_force_n: float
-    insertion_depth_m: float
-    lateral_error_m: float
-    tilt_rad: float
+    # The peg in the hole; None (null) when it is not at the hole (end_state "not_at_hole", see
+    # peg_ctrl.monitors.InsertionMeasure.at_hole): a lying peg has no depth in the bore.
+    insertion_depth_m: float | None
+    lateral_error_m: float | None
+    tilt_rad: float | None
     max_penetration_m: float  # peg-block and peg-table, whole episode
     resting_penetration_m: float  # peg's contacts at the end
     grip_penetration_m: float  # pads into the peg, whole episode
@@ -187,9 +189,9 @@ class EpisodeResult:
     first_contact_s: float | None  # first peg-block contact
     contact_to_seat_s: float | None  # from the first contact to the start of the seated hold
     contact_impulse_ns: float  # integral of the peg-block force from the first contact [N s]
-    max_tilt_rad: float  # largest peg tilt from the first contact on
+    max_tilt_rad: float | None  # largest peg tilt from the first contact on (None: no contact)
     search_distance_m: float  # lateral travel of the peg's lower end from the first contact on
-    end_state: str  # seated, missed, jammed or wedged (see peg_ctrl.monitors.classify_end_state)
+    end_state: str  # seated, missed, jammed, wedged or not_at_hole (monitors.episode_end_state)
     detail: str
     log_path: str
     trace_path: str
@@ -207,12 +209,16 @@ class EpisodeResult:
             head = f"{self.status.upper()} ({self.reason} in {self.phase})"
         tti = f", inserted at {self.time_to_insert_s:.2f} s" if self.time_to_insert_s is not None else ""
         task = f"{self.task}/{self.strategy}" if self.strategy else self.task
+        depth = (
+            f"depth {self.insertion_depth_m * 1e3:.1f} mm"
+            if self.insertion_depth_m is not None
+            else "peg not at the hole"
+        )
         return (
             f"{head}: {self.controller}+{self.planner} seed {self.seed} ({task}, {self.physics} physics), "
             f"{self.total_timesteps} steps "
             f"({self.sim_time_s:.2f} s sim, {self.wall_time_s:.1f} s wall){tti}, "
-            f"depth {self.insertion_depth_m * 1e3:.1f} mm, "
-            f"peak peg-block force {self.peak_contact_force_n:.2f} N"
+            f"{depth}, peak peg-block force {self.peak_contact_force_n:.2f} N"
         )
 
 
@@ -306,70 +312,122 @@ def run_episode(
 
     ``on_step`` (e.g. a viewer sync) is called after every control step. Ctrl-C writes the
     results so far (status ``interrupted``) and re-raises :class:`KeyboardInterrupt`.
+
+    Every file is complete or absent. ``summary.json`` is written as soon as the episode ends,
+    before the force trace is packed and before the optional plot and video, and rewritten when
+    they are done; a plot or video that fails leaves its path None in the summary, with an
+    :class:`~peg_ctrl.errors.OutputWarning`.
+
+    Raises:
+        OutputError: a file could not be written (no space left, read-only, ...), naming it;
+            raised after ``summary.json`` is written if the episode ended by then.
     """
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "config.json", json.dumps(to_dict(cfg), indent=2) + "\n")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output directory {str(out_dir)!r}: {exc.strerror or exc}") from None
+    remove_stale_temps(out_dir)  # of an earlier run of this episode, killed while writing
+    atomic_write_text(out_dir / "config.json", to_json(to_dict(cfg), indent=2) + "\n")
     logger = EpisodeLogger(out_dir)
-    loop = build_loop(cfg)
-    steps_log = StepLogRecorder(logger, cfg.log.interval)
-    states = StateRecorder(out_dir / "states.npz", loop.model.nq)
-    recorders: list[Recorder] = [steps_log, states]
-    trace = TraceRecorder(logger, loop.task.phases) if cfg.log.trace else None
-    if trace is not None:
-        recorders.insert(0, trace)
-    camera = VideoRecorder(loop.model, out_dir / "episode.mp4") if video else None
-    if camera is not None:
-        recorders.append(camera)
-    if on_step is not None:
-        recorders.append(CallbackRecorder(on_step))
-    loop.recorders = recorders
-    loop.reset(np.random.default_rng(cfg.seed))
-    states.start(loop.data)
-    wall0 = time.perf_counter()
-    outcome = loop.run(cfg.step_limit(loop.model.opt.timestep))
-    wall = time.perf_counter() - wall0
-    steps_log.flush(loop)
-    if trace is not None:
-        trace.flush()
-    states.close()
-    result = _result(cfg, loop, outcome, wall, logger)
-    logger.close({"event": "end", **result.to_dict()})
-    if camera is not None:
-        result.video_path = camera.close()
-    if plot:
-        from peg_ctrl.plots import plot_force_profile
+    camera: VideoRecorder | None = None
+    try:
+        loop = build_loop(cfg)
+        steps_log = StepLogRecorder(logger, cfg.log.interval)
+        states = StateRecorder(out_dir / "states.npz", loop.model.nq)
+        recorders: list[Recorder] = [steps_log, states]
+        trace = TraceRecorder(logger, loop.task.phases) if cfg.log.trace else None
+        if trace is not None:
+            recorders.insert(0, trace)
+        camera = VideoRecorder(loop.model, out_dir / "episode.mp4") if video else None
+        if camera is not None:
+            recorders.append(camera)
+        if on_step is not None:
+            recorders.append(CallbackRecorder(on_step))
+        loop.recorders = recorders
+        loop.reset(np.random.default_rng(cfg.seed))
+        states.start(loop.data)
+        wall0 = time.perf_counter()
+        outcome = loop.run(cfg.step_limit(loop.model.opt.timestep))
+        wall = time.perf_counter() - wall0
+        steps_log.flush(loop)
+        if trace is not None:
+            trace.flush()
+        result = _result(cfg, loop, outcome, wall, logger)
+        summary = out_dir / "summary.json"
+        # The record first: nothing written after it (the packed trace, plot, video) can lose it.
+        result.trace_path = str(logger.trace_path)
+        _write_summary(summary, result)
+        result.trace_path = str(logger.npz_path)
+        logger.close({"event": "end", **result.to_dict()})
+        states.close()
+        failed: list[OutputError] = []
+        if camera is not None:
+            result.video_path = _artefact("video", camera.close, failed)
+            camera = None
+        if plot:
+            from peg_ctrl.plots import plot_force_profile
 
-        result.plot_path = str(
-            plot_force_profile(logger.npz_path, result.phases, out_dir / "force_profile.png")
-        )
-    atomic_write_text(out_dir / "summary.json", json.dumps(result.to_dict(), indent=2) + "\n")
+            result.plot_path = _artefact(
+                "force plot",
+                lambda: str(
+                    plot_force_profile(logger.npz_path, result.phases, out_dir / "force_profile.png")
+                ),
+                failed,
+            )
+        _write_summary(summary, result)
+        if failed:
+            raise failed[0]
+    finally:
+        logger.abort()
+        if camera is not None:
+            camera.discard()
     if outcome.status == "interrupted":
         raise KeyboardInterrupt
     return result
 
 
+def _write_summary(path: Path, result: EpisodeResult) -> None:
+    atomic_write_text(path, to_json(result.to_dict(), indent=2) + "\n")
+
+
+def _artefact(what: str, make: Callable[[], str], failed: list[OutputError]) -> str | None:
+    """The path of an optional output made by ``make``, or None if it failed: an
+    :class:`OutputError` (no space, read-only) is kept in ``failed`` (and no further output is
+    tried), anything else is an :class:`OutputWarning`."""
+    if failed:
+        return None
+    try:
+        return make()
+    except OutputError as exc:
+        failed.append(exc)
+    except Exception as exc:
+        warnings.warn(
+            f"{what} not written: {' '.join(str(exc).split()) or type(exc).__name__}",
+            OutputWarning,
+            stacklevel=2,
+        )
+    return None
+
+
 def _result(
     cfg: EpisodeConfig, loop: Loop, outcome: LoopOutcome, wall: float, logger: EpisodeLogger
 ) -> EpisodeResult:
-    from peg_ctrl.monitors import classify_end_state
+    from peg_ctrl.monitors import episode_end_state
 
     task = loop.task
     insertion = getattr(task, "insertion", None)
     m = insertion.last if insertion is not None else None
-    depth, lateral, tilt = (m.depth_m, m.lateral_error_m, m.tilt_rad) if m is not None else (0.0, 0.0, 0.0)
+    depth, lateral, tilt = m.hole_metrics() if m is not None else (None, None, None)
     _, resting = loop.reader.pair_forces(loop.data)
     records = task.records
     grasp = loop.grasp
     history = loop.history
     time_to_insert = getattr(task, "time_to_insert", None)
     a = cfg.scene.assets
-    if outcome.status == "success":
-        end_state = "seated"
-    elif m is not None and math.isfinite(m.lateral_error_m):
-        end_state = classify_end_state(m, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius)
-    else:
-        end_state = "missed"
+    end_state = episode_end_state(
+        m, seated=outcome.status == "success", clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
+    )
     first = history.first_contact
     return EpisodeResult(
         status=outcome.status,
@@ -399,7 +457,7 @@ def _result(
             time_to_insert - first if time_to_insert is not None and first is not None else None
         ),
         contact_impulse_ns=history.impulse,
-        max_tilt_rad=history.max_tilt,
+        max_tilt_rad=history.max_tilt if first is not None else None,
         search_distance_m=history.travel,
         end_state=end_state,
         detail=outcome.detail,

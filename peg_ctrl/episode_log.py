@@ -1,8 +1,10 @@
 """Episode logging that never stalls the simulation loop.
 
 The loop hands records to a :class:`EpisodeLogger`, which queues them for a background writer
-thread. The writer serialises and writes them and flushes whenever the queue runs dry, so a
-crash or Ctrl-C leaves readable files up to the last flush:
+thread. The writer serialises what is queued and appends it, one write per file, whenever the
+queue runs dry, so the files grow by whole records: a write that fails (disk full) is cut back
+to the last whole record and reported to the loop's thread, and a process killed in a write
+leaves at most a torn last line or row, which :func:`read_log` and :func:`read_trace` skip:
 
 - ``log.jsonl`` — one JSON object per line: ``{"event": "step", ...}`` every ``interval`` steps
   with the SPEC §7 fields, ``{"event": "phase", ...}`` when a phase ends, ``{"event": "end", ...}``
@@ -17,6 +19,7 @@ crash or Ctrl-C leaves readable files up to the last flush:
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import queue
@@ -26,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from peg_ctrl.errors import OutputError
+from peg_ctrl.io import atomic_path, to_json, write_error
 from peg_ctrl.state import PAIRS
 
 __all__ = ["EpisodeLogger", "TRACE_COLUMNS", "read_log", "read_trace", "STEP_FIELDS"]
@@ -60,7 +65,17 @@ _STOP = object()
 
 
 class EpisodeLogger:
-    """Queue-fed writer of ``log.jsonl`` and the force trace in ``out_dir``."""
+    """Queue-fed writer of ``log.jsonl`` and the force trace in ``out_dir``.
+
+    Both files only ever grow by whole records: the writer appends each batch of JSON lines
+    (or trace rows) with one write and, if the write fails part-way (no space left), cuts the
+    file back to the last whole record. A write error stops the writer; the next :meth:`record`,
+    :meth:`trace` or :meth:`close` on the producer's thread raises it as
+    :class:`~peg_ctrl.errors.OutputError`.
+
+    Raises:
+        OutputError: ``log.jsonl`` or ``forces.partial`` cannot be created.
+    """
 
     def __init__(self, out_dir: Path) -> None:
         self.out_dir = Path(out_dir)
@@ -71,79 +86,147 @@ class EpisodeLogger:
         self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._trace_chunks: list[np.ndarray] = []
         self._error: BaseException | None = None
-        self._log_file = open(self.log_path, "w", encoding="utf-8")  # noqa: SIM115 (closed by the writer)
-        self._trace_file = open(self.trace_path, "wb")  # noqa: SIM115
+        self._log = _RecordFile(self.log_path)
+        try:
+            self._trace = _RecordFile(self.trace_path)
+        except OutputError:
+            self._log.close()
+            raise
         self._thread = threading.Thread(target=self._run, name="episode-log-writer", daemon=True)
         self._thread.start()
         self._closed = False
 
     # -- producer side (the simulation loop) -----------------------------------------------
     def record(self, entry: dict[str, Any]) -> None:
-        """Queue one JSON record (serialised on the writer thread)."""
+        """Queue one JSON record (serialised on the writer thread).
+
+        Raises:
+            OutputError: the writer failed (no space left, read-only, ...).
+        """
+        self._check()
         self._queue.put(("json", entry))
 
     def trace(self, rows: np.ndarray) -> None:
-        """Append rows (n, len(TRACE_COLUMNS)) to the force trace; the logger keeps ``rows``."""
+        """Append rows (n, len(TRACE_COLUMNS)) to the force trace; the logger keeps ``rows``.
+
+        Raises:
+            OutputError: the writer failed (no space left, read-only, ...).
+        """
+        self._check()
         self._trace_chunks.append(rows)
         self._queue.put(("trace", rows))
 
     def close(self, end_record: dict[str, Any] | None = None) -> None:
-        """Flush everything, write the end record and ``forces.npz``, stop the writer."""
+        """Flush everything, write the end record and ``forces.npz`` (atomically), stop the
+        writer and remove ``forces.partial``.
+
+        Raises:
+            OutputError: a write failed; ``log.jsonl`` keeps its whole records and
+                ``forces.partial`` its whole rows.
+        """
         if self._closed:
             return
         self._closed = True
         if end_record is not None:
             self._queue.put(("json", end_record))
-        self._queue.put(_STOP)
-        self._thread.join()
-        if self._error is not None:
-            raise RuntimeError(f"log writer failed: {self._error}") from self._error
+        self._stop()
+        self._check()
         chunks = self._trace_chunks or [np.zeros((0, len(TRACE_COLUMNS)))]
         trace = np.concatenate(chunks)
-        tmp = self.npz_path.with_name(self.npz_path.name + ".tmp.npz")
-        np.savez_compressed(tmp, columns=np.array(TRACE_COLUMNS), data=trace)
-        os.replace(tmp, self.npz_path)
+        with atomic_path(self.npz_path) as tmp:
+            np.savez_compressed(tmp, columns=np.array(TRACE_COLUMNS), data=trace)
         self.trace_path.unlink(missing_ok=True)
+
+    def abort(self) -> None:
+        """Stop the writer after what is queued, without the end record or ``forces.npz`` (an
+        episode that ended in an exception); ``forces.partial`` stays. Never raises."""
+        if not self._closed:
+            self._closed = True
+            self._stop()
+
+    def _stop(self) -> None:
+        self._queue.put(_STOP)
+        self._thread.join()
+
+    def _check(self) -> None:
+        error = self._error
+        if error is None:
+            return
+        if isinstance(error, OutputError):
+            raise error
+        raise RuntimeError(f"log writer failed: {error!r}") from error
 
     # -- consumer side (writer thread) ------------------------------------------------------
     def _run(self) -> None:
         try:
-            while True:
+            stop = False
+            while not stop:
+                lines: list[str] = []
+                rows: list[bytes] = []
                 item = self._queue.get()
-                while True:
+                while True:  # take everything queued: one write per file per batch
                     if item is _STOP:
-                        self._flush()
-                        return
+                        stop = True
+                        break
                     kind, payload = item
                     if kind == "json":
-                        self._log_file.write(json.dumps(payload, separators=(",", ":")) + "\n")
+                        lines.append(to_json(payload, separators=(",", ":")) + "\n")
                     else:
-                        self._trace_file.write(np.ascontiguousarray(payload, dtype="<f8").tobytes())
+                        rows.append(np.ascontiguousarray(payload, dtype="<f8").tobytes())
                     try:
                         item = self._queue.get_nowait()
                     except queue.Empty:
                         break
-                self._flush()  # the queue ran dry: make what we have durable
-        except BaseException as exc:  # reported by close()
+                self._log.append("".join(lines).encode("utf-8"))
+                self._trace.append(b"".join(rows))
+        except BaseException as exc:  # raised on the producer's thread by _check()
             self._error = exc
         finally:
-            self._log_file.close()
-            self._trace_file.close()
+            self._log.close()
+            self._trace.close()
 
-    def _flush(self) -> None:
-        self._log_file.flush()
-        self._trace_file.flush()
+
+class _RecordFile:
+    """An append-only file that grows by whole records: :meth:`append` writes a batch of whole
+    records and, if that fails part-way, truncates the file back to where the batch began."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.size = 0
+        try:
+            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+        except OSError as exc:
+            raise write_error(path, exc) from None
+
+    def append(self, data: bytes) -> None:
+        """Write ``data`` (whole records) at the end of the file.
+
+        Raises:
+            OutputError: the write failed; the file ends at its last whole record.
+        """
+        view = memoryview(data)
+        written = 0
+        try:
+            while written < len(view):
+                written += os.write(self._fd, view[written:])
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, self.size)
+            raise write_error(self.path, exc) from None
+        self.size += written
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            fd, self._fd = self._fd, -1
+            os.close(fd)
 
 
 def read_log(path: Path) -> list[dict[str, Any]]:
-    """All complete records of a ``log.jsonl`` (a torn last line, from a kill, is skipped)."""
-    records = []
-    with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            if not line.endswith("\n"):
-                break
-            records.append(json.loads(line))
-    return records
+    """All complete records of a ``log.jsonl``. A torn last line (the process was killed in a
+    write) is skipped; a damaged line before it raises :class:`json.JSONDecodeError`."""
+    lines = Path(path).read_bytes().split(b"\n")
+    # After the last newline: b"" for a whole file, else the start of a record cut short.
+    return [json.loads(line) for line in lines[:-1]]
 
 
 def read_trace(path: Path) -> np.ndarray:

@@ -6,7 +6,8 @@ front end can map them to exit codes in one place (see :mod:`peg_ctrl.cli`):
 - user input: :class:`ConfigError` (a bad configuration value or argument; the message names
   the field), :class:`UnknownComponent` (a name not in a registry; the message lists the known
   names), :class:`CommandError` (a command or target outside its bounds), :class:`OutputError`
-  (an output location that cannot be written), :class:`AssetError` (a required asset is missing);
+  (an output location that cannot be written; :class:`OutputInUse`: another peg-sim process is
+  using it), :class:`AssetError` (a required asset is missing);
 - the simulation: :class:`DivergenceError` (non-finite state or control, or a MuJoCo warning),
   :class:`PlanningError` (no trajectory satisfies the limits).
 
@@ -22,10 +23,12 @@ __all__ = [
     "UnknownComponent",
     "CommandError",
     "OutputError",
+    "OutputInUse",
     "AssetError",
     "DivergenceError",
     "PlanningError",
     "EpisodeFailure",
+    "OutputWarning",
     "FAILURE_REASONS",
     "USER_ERRORS",
 ]
@@ -56,6 +59,20 @@ class CommandError(PegCtrlError, ValueError):
 
 class OutputError(PegCtrlError, OSError):
     """An output path cannot be used (it is a file, read-only, or the disk is full)."""
+
+
+class OutputInUse(OutputError):
+    """An output directory is locked by another running peg-sim process (a run or a sweep);
+    ``pid`` is that process's id, if known."""
+
+    def __init__(self, message: str, *, pid: int | None = None) -> None:
+        super().__init__(message)
+        self.pid = pid
+
+
+class OutputWarning(UserWarning):
+    """An optional output (a plot, a video) could not be made; the run's results are intact and
+    its record says which output is missing (e.g. ``plot_path: null``)."""
 
 
 class AssetError(PegCtrlError, FileNotFoundError):

@@ -56,7 +56,9 @@ Termination and truncation
     ``success.consecutive_steps`` control steps) or a monitor fails the episode
     (``info["reason"]``: ``force_spike``, ``grasp_lost``, ``excessive_tilt`` or ``diverged``).
     ``truncated`` after ``time_limit_s`` of simulated time (default 5 s for ``held_insertion``,
-    20 s for ``pick_and_place``).
+    20 s for ``pick_and_place``). ``info`` also has ``depth_m``, ``lateral_error_m`` and
+    ``tilt_rad`` of the peg in the hole (NaN while the peg is not at the hole: lying, or beside
+    the block), ``peg_block_force_n`` (the period's peak) and ``t`` [s].
 
 Other keyword arguments of ``gymnasium.make``
     ``controller`` (name or mapping, default ``pd``); ``profile`` (physics profile, default
@@ -93,7 +95,7 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget, euler_to_quat
 from peg_ctrl.config import ConfigError, read_mapping
 from peg_ctrl.episode import DomainConfig, EpisodeConfig, build_loop, episode_config_from_mapping
-from peg_ctrl.errors import EpisodeFailure
+from peg_ctrl.errors import CommandError, EpisodeFailure
 from peg_ctrl.loop import Loop, StepInfo
 from peg_ctrl.recorders import FollowCamera
 from peg_ctrl.rotations import quat_mul, rotate_inv
@@ -367,9 +369,9 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             raise RuntimeError("step() after the episode ended; call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.shape != (7,):
-            raise ValueError(f"action must have shape (7,), got {np.shape(action)}")
+            raise CommandError(f"action must have shape (7,), got {np.shape(action)}")
         if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()}")
+            raise CommandError(f"action must be finite, got {a.tolist()}")
         self.task.command = self._target(a)
         success, reason = False, ""
         try:
@@ -457,13 +459,14 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         return float(sum(terms.values())), terms
 
     def _info(self, m: Any, *, success: bool, reason: str) -> dict[str, Any]:
+        depth, lateral, tilt = (math.nan if v is None else float(v) for v in m.hole_metrics())
         return {
             "success": success,
             "reason": reason,
             "t": float(self.data.time),
-            "depth_m": float(m.depth_m),
-            "lateral_error_m": float(m.lateral_error_m),
-            "tilt_rad": float(m.tilt_rad),
+            "depth_m": depth,  # NaN while the peg is not at the hole (lying, or beside the block)
+            "lateral_error_m": lateral,
+            "tilt_rad": tilt,
             "peg_block_force_n": float(self._last.block_force),
         }
 

@@ -65,7 +65,9 @@ class JawCalibration:
         return float(np.interp(sep_m, self._sep_inc, self._bytes_dec))  # type: ignore[attr-defined]
 
     def to_json(self) -> str:
-        return json.dumps(
+        from peg_ctrl.io import to_json
+
+        return to_json(
             {
                 "bytes": [round(float(b), 6) for b in self.bytes_],
                 "sep_m": [round(float(s), 9) for s in self.sep_m],

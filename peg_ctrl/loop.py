@@ -254,7 +254,7 @@ class Loop:
         np.sqrt(block, out=self._block_force)
         peg = self.peg = self.reader.peg(data, float(self._block_force[-1]), self._half_length)
         try:
-            self.divergence.check(data)
+            self.divergence.check(data, state.t)
             self.history.update(float(data.time), self.model.opt.timestep, self._block_force, peg)
             self.contact.check(forces, pens)
             if self.grasp is not None and self.task.grasped:

@@ -16,7 +16,7 @@ episode's outcome.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import mujoco
 import numpy as np
@@ -38,13 +38,19 @@ __all__ = [
     "ContactHistory",
     "SeatedHold",
     "classify_end_state",
+    "episode_end_state",
+    "not_at_hole_detail",
     "END_STATES",
+    "AT_HOLE_MAX_TILT",
     "ENTRY_MARGIN",
     "FIRST_CONTACT_N",
     "WEDGED_FRACTION",
 ]
 
-END_STATES = ("seated", "missed", "jammed", "wedged")
+END_STATES = ("seated", "missed", "jammed", "wedged", "not_at_hole")
+# A peg tilted further than this from vertical is not at the hole: nearer lying than upright,
+# the height of its lower end says nothing about how deep it is in the bore [rad].
+AT_HOLE_MAX_TILT = math.radians(45.0)
 ENTRY_MARGIN = 0.0005  # the lower end is in the bore this far below the chamfer [m]
 WEDGED_FRACTION = 0.9  # tilted to at least this fraction of the two-point-contact limit: wedged
 
@@ -56,6 +62,11 @@ class InsertionMeasure(NamedTuple):
     peg axis to the hole axis at the mouth (``inf`` for a horizontal peg); ``radial_m`` [m]
     horizontal distance of the peg centre from the hole axis; ``bottom_z_m`` [m] height of the
     lower end; ``tilt_rad`` [rad] of the peg axis from vertical; ``speed`` [m/s] of the centre.
+
+    ``at_hole``: the peg is over the hole, so that depth, lateral error and tilt describe it in
+    the hole: it is upright within :data:`AT_HOLE_MAX_TILT` and its axis meets the plane of the
+    mouth within the block's top face. A peg lying on the table, or standing beside the block,
+    is not: its lower end may be 40 mm below the mouth's height without being in the bore.
     """
 
     depth_m: float
@@ -64,6 +75,14 @@ class InsertionMeasure(NamedTuple):
     bottom_z_m: float
     tilt_rad: float
     speed: float
+    at_hole: bool = True
+
+    def hole_metrics(self) -> tuple[float | None, float | None, float | None]:
+        """``(depth_m, lateral_error_m, tilt_rad)`` for an episode record: all None (undefined)
+        when the peg is not :attr:`at_hole`."""
+        if not self.at_hole:
+            return None, None, None
+        return self.depth_m, self.lateral_error_m, self.tilt_rad
 
 
 class InsertionCriterion(Protocol):
@@ -104,6 +123,8 @@ class InsertionMonitor:
     def __init__(self, scene: SceneConfig, criterion: InsertionCriterion) -> None:
         self.block_top = float(scene.assets.block_size[2])
         self.hole_x, self.hole_y = (float(v) for v in scene.hole_xy)
+        # The block's top face around the hole axis (the block is centred on it, unrotated) [m].
+        self.half_x, self.half_y = (0.5 * float(v) for v in scene.assets.block_size[:2])
         self.criterion = criterion
         self.last: InsertionMeasure | None = None
 
@@ -113,13 +134,18 @@ class InsertionMonitor:
         hx, hy = self.hole_x, self.hole_y
         depth = self.block_top - float(peg.bottom_world[2])
         tilt = math.acos(min(1.0, abs(float(axis[2]))))
+        at_hole = False
         if abs(axis[2]) > 1e-6:
             s = (self.block_top - p[2]) / axis[2]
-            lateral = math.hypot(p[0] + s * axis[0] - hx, p[1] + s * axis[1] - hy)
+            dx, dy = float(p[0] + s * axis[0] - hx), float(p[1] + s * axis[1] - hy)
+            lateral = math.hypot(dx, dy)
+            at_hole = tilt <= AT_HOLE_MAX_TILT and abs(dx) <= self.half_x and abs(dy) <= self.half_y
         else:
             lateral = math.inf
         radial = math.hypot(float(p[0]) - hx, float(p[1]) - hy)
-        self.last = InsertionMeasure(depth, lateral, radial, float(peg.bottom_world[2]), tilt, peg.speed)
+        self.last = InsertionMeasure(
+            depth, lateral, radial, float(peg.bottom_world[2]), tilt, peg.speed, at_hole
+        )
         return self.last
 
     def inserted(self, peg: PegObservation) -> bool:
@@ -221,26 +247,50 @@ class GraspMonitor:
 
 
 class DivergenceMonitor:
-    """Fails on a new MuJoCo warning or a non-finite state. Checked every control period:
-    MuJoCo's warning counters keep a blow-up (bad qpos, qvel or qacc) of any physics step in
-    between; the sum of the state, which catches a NaN anywhere else, every ``state_every``-th."""
+    """Fails with ``diverged`` when any physics step of a control period went bad; checked once
+    per period, at the cost of a few comparisons.
 
-    def __init__(self, state_every: int = 10) -> None:
-        self.state_every = state_every
-        self._warnings0 = 0
-        self._count = 0
+    Three signs, each of which a bad step leaves behind for the rest of the period:
+
+    - a new MuJoCo warning (its counters ``data.warning[i].number`` accumulate over steps):
+      ``BADQPOS``/``BADQVEL``/``BADQACC`` (a NaN, Inf or value over 1e10 in the state),
+      ``INERTIA`` (a singular mass matrix), ``CONTACTFULL``/``CNSTRFULL`` (buffers overflowed,
+      contacts lost), ``BADCTRL``. The failure's detail is MuJoCo's own text for it;
+    - simulated time going back: on a bad state MuJoCo resets the simulation (``mj_resetData``,
+      which also clears the warning counters) and carries on from the start;
+    - a non-finite ``qpos`` or ``qvel`` (a NaN that no check of MuJoCo's saw).
+    """
+
+    def __init__(self) -> None:
+        self._warnings0 = np.zeros(len(mujoco.mjtWarning.__members__) - 1, dtype=np.int64)
 
     def reset(self, data: mujoco.MjData) -> None:
-        self._warnings0 = int(data.warning.number.sum())
-        self._count = 0
+        self._warnings0 = data.warning.number.copy()
 
-    def check(self, data: mujoco.MjData) -> None:
-        self._count += 1
-        if int(data.warning.number.sum()) != self._warnings0 or (
-            self._count % self.state_every == 0
-            and not math.isfinite(float(data.qpos.sum() + data.qvel.sum()))
-        ):
-            raise EpisodeFailure("diverged", "non-finite state or MuJoCo warning")
+    def check(self, data: mujoco.MjData, t_start: float) -> None:
+        """Raise :class:`EpisodeFailure` ``diverged`` if a step since ``t_start`` [s] (the time
+        at the start of the control period) went bad."""
+        number = data.warning.number
+        if data.time < t_start:
+            raise EpisodeFailure(
+                "diverged",
+                f"MuJoCo reset the simulation after a bad state (time went back from {t_start:.4f} s "
+                f"to {data.time:.4f} s){_warning_text(data, number.nonzero()[0])}",
+            )
+        changed = (number != self._warnings0).nonzero()[0]
+        if len(changed):
+            raise EpisodeFailure("diverged", _warning_text(data, changed).removeprefix(": "))
+        if not math.isfinite(float(data.qpos.sum() + data.qvel.sum())):
+            raise EpisodeFailure("diverged", f"non-finite state at t={data.time:.4f} s")
+
+
+def _warning_text(data: mujoco.MjData, kinds: Any) -> str:
+    """``": <MuJoCo's text> (mjWARN_X at t=...)"`` for the first of the warnings ``kinds``."""
+    if not len(kinds):
+        return ""
+    kind = int(kinds[0])
+    text = mujoco.mju_warningText(kind, int(data.warning[kind].lastinfo))
+    return f": {text} ({mujoco.mjtWarning(kind).name}, t={data.time:.4f} s)"
 
 
 def classify_end_state(m: InsertionMeasure, *, clearance: float, chamfer: float, radius: float) -> str:
@@ -258,6 +308,28 @@ def classify_end_state(m: InsertionMeasure, *, clearance: float, chamfer: float,
         return "jammed"  # an interference fit: no tilt fits, the peg is held by the bore itself
     limit = wedging_tilt(clearance, m.depth_m - chamfer, radius)
     return "wedged" if m.tilt_rad >= WEDGED_FRACTION * limit else "jammed"
+
+
+def not_at_hole_detail(m: InsertionMeasure) -> str:
+    """Where a peg that is not at the hole is, for a failure's detail."""
+    return (
+        f"peg not at the hole (tilted {math.degrees(m.tilt_rad):.0f} deg, its centre "
+        f"{m.radial_m * 1e3:.0f} mm from the hole axis, its lower end at {m.bottom_z_m * 1e3:.0f} mm)"
+    )
+
+
+def episode_end_state(
+    m: InsertionMeasure | None, *, seated: bool, clearance: float, chamfer: float, radius: float
+) -> str:
+    """The ``end_state`` of an episode record, from the last measure ``m`` of the peg:
+    ``seated`` if it was inserted; ``not_at_hole`` if it never got to the hole (``m`` is None or
+    not :attr:`~InsertionMeasure.at_hole`: lying, dropped, beside the block); else
+    :func:`classify_end_state` (``missed``, ``jammed`` or ``wedged``)."""
+    if seated:
+        return "seated"
+    if m is None or not m.at_hole:
+        return "not_at_hole"
+    return classify_end_state(m, clearance=clearance, chamfer=chamfer, radius=radius)
 
 
 FIRST_CONTACT_N = 0.05  # peg-block force that counts as contact [N]

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from peg_ctrl.io import atomic_path
+
 __all__ = ["plot_force_profile", "PHASE_COLOURS"]
 
 #: Phase name -> colour of its span (the strip at the top; the panels shade it lighter).
@@ -153,8 +155,11 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
     fig.suptitle("Contact forces by phase", fontsize=11)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp)
+    finally:
+        plt.close(fig)
     return out
 
 

@@ -112,7 +112,7 @@ def validate_profile(
 ) -> dict[str, Any]:
     """Run both tasks in both profiles; write ``validation.json`` and ``validation.md`` to ``out``."""
     from peg_ctrl.batch import run_batch
-    from peg_ctrl.io import atomic_write_text
+    from peg_ctrl.io import atomic_write_text, to_json
 
     result: dict[str, Any] = {
         "candidate": candidate,
@@ -151,7 +151,7 @@ def validate_profile(
             "checks": checks,
         }
     result["passed"] = all(all(t["checks"].values()) for t in result["tasks"].values())
-    atomic_write_text(out / "validation.json", json.dumps(result, indent=2) + "\n")
+    atomic_write_text(out / "validation.json", to_json(result, indent=2) + "\n")
     atomic_write_text(out / "validation.md", format_report(result))
     return result
 

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import math
+import os
+import struct
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -13,8 +17,8 @@ from numpy.typing import NDArray
 
 from peg_ctrl.commands import quat_to_euler
 from peg_ctrl.episode_log import TRACE_COLUMNS, EpisodeLogger
-from peg_ctrl.errors import ConfigError
-from peg_ctrl.io import atomic_write_bytes
+from peg_ctrl.errors import ConfigError, OutputError
+from peg_ctrl.io import atomic_write_bytes, commit_temp, temp_path, write_error
 from peg_ctrl.scene import PINCH_SITE
 from peg_ctrl.state import PAIRS
 
@@ -249,6 +253,10 @@ class VideoRecorder:
     frame every ``1/fps`` s of simulated time; :meth:`add_frame` adds one from any ``MjData``
     (e.g. a replay).
 
+    The video is written to a temporary file beside ``path`` and renamed to ``path`` by
+    :meth:`close`, so ``path`` is a whole video or absent. In the loop a failing frame (a full
+    disk, the renderer) does not stop the episode: recording stops and :meth:`close` raises.
+
     Raises:
         ConfigError: a view that is neither ``"follow"`` nor one of the model's cameras (the
             message lists them), no views, or ``fps`` < 1.
@@ -282,9 +290,20 @@ class VideoRecorder:
         self._next = 0.0
         self._follow = FollowCamera(model) if FOLLOW in self.views else None
         self._renderer = mujoco.Renderer(model, *size)
-        self._writer = imageio.get_writer(
-            str(self.path), fps=fps, codec="libx264", quality=7, macro_block_size=8
-        )
+        self._tmp = temp_path(self.path)
+        self._error: Exception | None = None
+        try:
+            self._writer = imageio.get_writer(
+                str(self._tmp),
+                fps=fps,
+                codec="libx264",
+                quality=7,
+                macro_block_size=8,
+                ffmpeg_log_level="quiet",  # a failure is raised as an OutputError, in one line
+            )
+        except BaseException:
+            self._renderer.close()
+            raise
         self._closed = False
 
     def cameras(self, data: mujoco.MjData) -> list[mujoco.MjvCamera | str]:
@@ -312,18 +331,90 @@ class VideoRecorder:
         self.frames += 1
 
     def record(self, loop: Loop, info: StepInfo) -> None:
-        if info.t + 1e-9 < self._next:
+        if self._error is not None or info.t + 1e-9 < self._next:
             return
         self._next += self._period
-        self.add_frame(loop.data)
+        try:
+            self.add_frame(loop.data)
+        except Exception as exc:  # the episode goes on without its video; close() raises it
+            self._error = exc
 
     def close(self) -> str:
-        """Finish the MP4 and free the renderer; returns the video's path."""
-        if not self._closed:
-            self._closed = True
+        """Finish the MP4, free the renderer and put the video in place; returns its path.
+
+        Raises:
+            OutputError: the video could not be written (no space left, ...); nothing is left.
+            Exception: whatever stopped the recording (e.g. the renderer).
+        """
+        if self._closed:
+            return str(self.path)
+        self._closed = True
+        try:
             self._writer.close()
+        except OSError as exc:
+            self._error = self._error or exc
+        finally:
             self._renderer.close()
+        if self._error is not None:
+            Path(self._tmp).unlink(missing_ok=True)
+            if isinstance(self._error, OSError):
+                raise write_error(self.path, self._error) from None
+            raise self._error
+        if self.frames or Path(self._tmp).exists():  # no frame, no file (imageio starts on the first)
+            # imageio does not report an encoder that failed at the end (writing the index):
+            # check the file's structure before it goes in place.
+            if not _mp4_is_whole(self._tmp):
+                Path(self._tmp).unlink(missing_ok=True)
+                raise OutputError(f"cannot write {str(self.path)!r}: {_encoder_failure(self.path)}")
+            commit_temp(self._tmp, self.path)
         return str(self.path)
+
+    def discard(self) -> None:
+        """Stop without a video: free the writer and the renderer, remove the partial file."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            with contextlib.suppress(Exception):  # the partial video is removed anyway
+                self._writer.close()
+        finally:
+            self._renderer.close()
+            Path(self._tmp).unlink(missing_ok=True)
+
+
+def _mp4_is_whole(path: Path) -> bool:
+    """Whether ``path`` is a structurally complete MP4: top-level boxes that fill the file
+    exactly, among them the media data and the index (``moov``, which ffmpeg writes last)."""
+    size = os.path.getsize(path)
+    kinds = set()
+    pos = 0
+    with open(path, "rb") as fh:
+        while pos < size:
+            fh.seek(pos)
+            head = fh.read(16)
+            if len(head) < 8:
+                return False
+            length, kind = struct.unpack(">I4s", head[:8])
+            if length == 1 and len(head) == 16:  # a 64-bit size follows
+                length = struct.unpack(">Q", head[8:])[0]
+            elif length == 0:  # to the end of the file
+                length = size - pos
+            if length < 8:
+                return False
+            kinds.add(kind)
+            pos += length
+    return pos == size and {b"ftyp", b"mdat", b"moov"} <= kinds
+
+
+def _encoder_failure(path: Path) -> str:
+    """Why the encoder left an incomplete video, as well as it can be told."""
+    try:
+        free = os.statvfs(Path(path).parent)
+    except OSError:
+        return "the video encoder (ffmpeg) failed"
+    if free.f_bavail * free.f_frsize < 1 << 20:
+        return os.strerror(errno.ENOSPC)
+    return "the video encoder (ffmpeg) failed"
 
 
 class CallbackRecorder:

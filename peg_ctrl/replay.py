@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.io import prepare_output_dir, prepare_output_file
+from peg_ctrl.io import atomic_path, prepare_output_dir, prepare_output_file, write_error
 
 __all__ = ["replay", "frame_times", "load_run", "extract_frames", "REPLAY_FPS"]
 
@@ -137,8 +137,13 @@ def replay(
             data.time = t[i]
             mujoco.mj_forward(model, data)
             recorder.add_frame(data)
-    finally:
-        recorder.close()
+    except OSError as exc:
+        recorder.discard()
+        raise write_error(out, exc) from None
+    except BaseException:
+        recorder.discard()  # no partial video
+        raise
+    recorder.close()
     return out
 
 
@@ -207,7 +212,8 @@ def extract_frames(
                 size = (width, round(image.height * width / image.width))
                 image = image.resize(size, Image.Resampling.LANCZOS)
             target = directory / f"{prefix}_{when:05.2f}s.png"
-            image.save(target, optimize=True)
+            with atomic_path(target) as tmp:
+                image.save(tmp, optimize=True)
             written.append(target)
     finally:
         reader.close()

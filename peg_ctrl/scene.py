@@ -22,13 +22,13 @@ their contacts, the flag stays off; ``SceneConfig.contact_override=True`` turns 
 from __future__ import annotations
 
 import dataclasses
-import shutil
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from peg_ctrl.assets import AssetParams, ensure_assets, part_name
+from peg_ctrl.io import atomic_write_bytes, atomic_write_text
 from peg_ctrl.menagerie import gripper_xml
 from peg_ctrl.physics import SEED, PhysicsProfile, profile
 
@@ -508,7 +508,7 @@ def export_robot(out_dir: Path, cfg: SceneConfig | None = None) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "robot.xml"
-    path.write_text(spec.to_xml())
+    atomic_write_text(path, spec.to_xml())
     return path
 
 
@@ -530,7 +530,7 @@ def export_scene(out_dir: Path, cfg: SceneConfig | None = None, physics: str | P
         if src is None:
             continue
         dst_name = (elem.get("name") or Path(src).stem).replace("/", "_") + Path(src).suffix
-        shutil.copyfile(src, mesh_dir / dst_name)
+        atomic_write_bytes(mesh_dir / dst_name, Path(src).read_bytes())
         elem.set("file", dst_name)
     compiler = root.find("compiler")
     if compiler is None:
@@ -539,6 +539,6 @@ def export_scene(out_dir: Path, cfg: SceneConfig | None = None, physics: str | P
     compiler.set("meshdir", "meshes")
     path = out_dir / "scene.xml"
     ET.indent(root)
-    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    atomic_write_text(path, ET.tostring(root, encoding="unicode") + "\n")
     mujoco.MjModel.from_xml_path(str(path))  # fail here, not in the user's viewer
     return path

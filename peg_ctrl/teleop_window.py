@@ -156,8 +156,11 @@ def run_window(
         if screenshot is not None:
             import imageio.v2 as imageio
 
+            from peg_ctrl.io import atomic_path
+
             screenshot.parent.mkdir(parents=True, exist_ok=True)
-            imageio.imwrite(str(screenshot), last_frame)
+            with atomic_path(screenshot) as tmp:
+                imageio.imwrite(str(tmp), last_frame)
     finally:
         summary = session.finish(session.end_reason or "quit")
         context.free()

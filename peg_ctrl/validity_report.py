@@ -7,7 +7,6 @@ tables), ``clearance.png`` (insertion rate and depth against clearance per profi
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -16,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.assets import AssetParams
-from peg_ctrl.io import atomic_write_bytes, atomic_write_text
+from peg_ctrl.io import atomic_write_bytes, atomic_write_text, to_json
 from peg_ctrl.physics import profile
 from peg_ctrl.validity import (
     CLEARANCES,
@@ -81,7 +80,7 @@ def run_battery(
                 "penetration": pen.summary(),
             }
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "validity.json", json.dumps(data, indent=1, sort_keys=True) + "\n")
+    atomic_write_text(out / "validity.json", to_json(data, indent=1, sort_keys=True) + "\n")
     _plot_clearance(out / "clearance.png", study)
     _plot_force_depth(out / "force_depth.png", study)
     path = out / "validity.md"

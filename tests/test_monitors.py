@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import mujoco
@@ -93,13 +94,71 @@ def test_contact_monitor_keeps_peaks_and_fails_on_a_spike() -> None:
 
 def test_divergence_monitor_catches_a_nan_and_a_warning(model: mujoco.MjModel) -> None:
     data = mujoco.MjData(model)
-    m = DivergenceMonitor(state_every=1)
+    m = DivergenceMonitor()
     m.reset(data)
-    m.check(data)  # a clean state passes
+    m.check(data, 0.0)  # a clean state passes
     data.qvel[0] = np.nan
-    with pytest.raises(EpisodeFailure, match="diverged"):
-        m.check(data)
+    with pytest.raises(EpisodeFailure, match="non-finite state") as info:
+        m.check(data, 0.0)
+    assert info.value.reason == "diverged"
     data.qvel[0] = 0.0
     data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number += 1  # as MuJoCo counts a blow-up
-    with pytest.raises(EpisodeFailure, match="diverged"):
-        m.check(data)
+    data.warning[mujoco.mjtWarning.mjWARN_BADQACC].lastinfo = 3
+    with pytest.raises(EpisodeFailure, match=r"QACC at DOF 3.*mjWARN_BADQACC"):
+        m.check(data, 0.0)
+
+
+def test_divergence_monitor_sees_mujocos_reset_through_old_warnings(model: mujoco.MjModel) -> None:
+    """A bad state makes MuJoCo reset the data, which clears the warning counters before it
+    counts the new one: with one warning already counted at the start, the count is unchanged,
+    but time went back."""
+    data = mujoco.MjData(model)
+    data.warning[mujoco.mjtWarning.mjWARN_BADQVEL].number = 1
+    m = DivergenceMonitor()
+    m.reset(data)
+    data.time = 2.5
+    m.check(data, 2.4)
+    data.time = 0.001  # after MuJoCo's reset and one step
+    with pytest.raises(EpisodeFailure, match=r"time went back from 2.6000 s to 0.0010 s.*BADQVEL"):
+        m.check(data, 2.6)
+
+
+def test_a_bad_velocity_mid_episode_ends_it_diverged_not_force_spike(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A velocity of 1e12 (as a blow-up produces) injected after a control step: MuJoCo flags it
+    on the next physics step and resets the state, whose jump would also read as a force spike;
+    the episode ends ``diverged``, naming MuJoCo's warning."""
+    from peg_ctrl.episode import episode_config_from_mapping, run_episode
+
+    def kick(model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        if 1.0 <= data.time < 1.0 + 0.006:
+            data.qvel[:] = 1e12
+
+    cfg = episode_config_from_mapping({"max_steps": 3000})
+    result = run_episode(cfg, tmp_path, plot=False, on_step=kick)
+    assert (result.status, result.reason) == ("failure", "diverged")
+    assert "mjWARN_BADQVEL" in result.detail
+    assert 1.0 <= result.sim_time_s <= 1.02 or "time went back" in result.detail
+
+
+def test_a_degenerate_peg_diverges_and_a_sweep_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A peg of 1e-30 times its mass: MuJoCo's inertia solve fails within a few steps. That
+    episode ends ``diverged``; the sweep runs the others to the end."""
+    from peg_ctrl.experiments.config import experiment_from_mapping
+    from peg_ctrl.experiments.runner import run_sweep
+
+    exp = experiment_from_mapping(
+        {
+            "name": "diverge",
+            "controllers": [{"name": "pd"}],
+            "seeds": 1,
+            "max_steps": 1500,
+            "grid": {"domain.peg_mass_scale": [[1e-30, 1e-30], [1.0, 1.0]]},
+        }
+    )
+    rows = run_sweep(exp, tmp_path / "sweep", workers=1, progress=False, report=False)
+    reasons = sorted(row["reason"] for row in rows)
+    assert len(rows) == 2 and reasons == ["diverged", "timeout"]
+    details = [
+        json.loads(p.read_text())["detail"] for p in (tmp_path / "sweep").glob("episodes/*/summary.json")
+    ]
+    assert any("mjWARN_INERTIA" in d for d in details), details

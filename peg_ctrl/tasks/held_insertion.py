@@ -77,6 +77,7 @@ from peg_ctrl.monitors import (
     SeatedCriterion,
     SeatedHold,
     classify_end_state,
+    not_at_hole_detail,
 )
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.rotations import quat_mul, rotate, rotate_inv, yaw_quat
@@ -378,6 +379,8 @@ class HeldInsertionTask:
             detail = (
                 f"peg {state} (depth {m.depth_m * 1e3:.1f} mm, lateral {m.lateral_error_m * 1e3:.2f} mm, "
                 f"tilt {math.degrees(m.tilt_rad):.2f} deg)"
+                if m.at_hole
+                else not_at_hole_detail(m)
             )
             return Evaluation(True, False, state, detail, m)
         return Evaluation(False, False, "", "", m)

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import ConfigError, EpisodeFailure
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion, SeatedHold
+from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion, SeatedHold, not_at_hole_detail
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.rotations import quat_mul, rotate_inv, yaw_quat
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
@@ -288,9 +288,13 @@ class PickAndPlaceTask:
                 return Evaluation(
                     True, False, "excessive_tilt", f"peg came to rest tilted {m.tilt_rad:.2f} rad", m
                 )
-            detail = (
-                f"peg not inserted (depth {m.depth_m * 1e3:.1f} mm, lateral {m.lateral_error_m * 1e3:.1f} mm)"
-            )
+            if m.at_hole:
+                detail = (
+                    f"peg not inserted (depth {m.depth_m * 1e3:.1f} mm, "
+                    f"lateral {m.lateral_error_m * 1e3:.1f} mm)"
+                )
+            else:
+                detail = not_at_hole_detail(m)
             return Evaluation(True, False, "timeout", detail, m)
         return Evaluation(False, False, "", "", m)
 

@@ -14,7 +14,6 @@ simulated time, so the logs, the force trace and the states stay in time order.
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -28,9 +27,9 @@ from peg_ctrl.controllers import ControllerConfig
 from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model
 from peg_ctrl.episode_log import EpisodeLogger
 from peg_ctrl.errors import EpisodeFailure
-from peg_ctrl.io import atomic_write_text
+from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.loop import Loop, StepInfo
-from peg_ctrl.monitors import ContactMonitor, classify_end_state
+from peg_ctrl.monitors import ContactMonitor, episode_end_state
 from peg_ctrl.physics import PhysicsConfig
 from peg_ctrl.recorders import StateRecorder, TraceRecorder, step_record
 from peg_ctrl.scene import HOME_KEY, SceneConfig
@@ -214,14 +213,10 @@ class TeleopSession:
         loop, contact, history = self.loop, self.loop.contact, self.loop.history
         _, resting = loop.reader.pair_forces(self.data)
         a = self.scene.assets
-        if inserted:
-            end_state = "seated"
-        elif math.isfinite(check.lateral_error_m):
-            end_state = classify_end_state(
-                check, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
-            )
-        else:
-            end_state = "missed"
+        end_state = episode_end_state(
+            check, seated=inserted, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
+        )
+        depth, lateral, tilt = check.hole_metrics()
         tti, first = self.task.time_to_insert, history.first_contact
         # None unless the peg touched the block before the insertion was detected (the operator
         # may lower it in without touching, then let it fall against the bore).
@@ -241,9 +236,9 @@ class TeleopSession:
             "wall_time_s": time.perf_counter() - self.wall0,
             "peak_contact_force_n": contact.peak_block,
             "peak_any_contact_force_n": contact.peak_any,
-            "insertion_depth_m": check.depth_m,
-            "lateral_error_m": check.lateral_error_m,
-            "tilt_rad": check.tilt_rad,
+            "insertion_depth_m": depth,
+            "lateral_error_m": lateral,
+            "tilt_rad": tilt,
             "max_penetration_m": contact.max_penetration,
             "resting_penetration_m": max(resting),
             "grip_penetration_m": contact.grip_penetration,
@@ -252,12 +247,12 @@ class TeleopSession:
             "first_contact_s": first,
             "contact_to_seat_s": to_seat,
             "contact_impulse_ns": history.impulse,
-            "max_tilt_rad": history.max_tilt,
+            "max_tilt_rad": history.max_tilt if first is not None else None,
             "search_distance_m": history.travel,
             "end_state": end_state,
             "detail": detail or f"session ended: {reason}",
             "log_path": str(self.logger.log_path),
-            "trace_path": str(self.logger.npz_path),
+            "trace_path": str(self.logger.trace_path),
             "plot_path": None,
             "video_path": None,
             "phases": [r.to_dict() for r in self.task.records],
@@ -266,10 +261,17 @@ class TeleopSession:
             "peg_radial_m": check.radial_m,
             "peg_bottom_z_m": check.bottom_z_m,
         }
-        self.trace.flush()
-        self.states.close()
-        self.logger.close({"event": "end", **self.summary})
-        atomic_write_text(self.out_dir / "summary.json", _json(self.summary))
+        summary = self.out_dir / "summary.json"
+        try:
+            self.trace.flush()
+            # The record first: packing the trace and the states cannot lose it.
+            atomic_write_text(summary, _json(self.summary))
+            self.summary["trace_path"] = str(self.logger.npz_path)
+            self.logger.close({"event": "end", **self.summary})
+            self.states.close()
+            atomic_write_text(summary, _json(self.summary))
+        finally:
+            self.logger.abort()
         return self.summary
 
     # -- overlay ------------------------------------------------------------------------------
@@ -303,6 +305,4 @@ def _teleop_step(loop: Loop, info: StepInfo) -> dict[str, Any]:
 
 
 def _json(data: dict[str, Any]) -> str:
-    import json
-
-    return json.dumps(data, indent=2) + "\n"
+    return to_json(data, indent=2) + "\n"

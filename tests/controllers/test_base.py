@@ -122,7 +122,34 @@ def test_template_names_a_non_finite_target(model: mujoco.MjModel, home_state: C
     bad = GripperTarget.trusted(
         np.asarray(HOME), np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3), math.nan
     )
-    with pytest.raises(CommandError, match="jaw_sep_m=nan"):
+    with pytest.raises(CommandError, match="target jaw_sep_m must be in \\[0, 0.085\\] m, got nan"):
+        c.compute(home_state, bad)
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize(
+    ("quat", "jaw", "match"),
+    [
+        ((1.0, 0.0, 0.0, 0.0), 0.0851, r"jaw_sep_m must be in \[0, 0.085\] m, got 0.0851"),
+        ((1.0, 0.0, 0.0, 0.0), -0.001, r"jaw_sep_m must be in \[0, 0.085\] m, got -0.001"),
+        ((0.0, 0.0, 0.0, 0.0), 0.05, r"unit quaternion, got \[0.0, 0.0, 0.0, 0.0\] \(norm 0\)"),
+        ((1.0, 0.0, 0.0, 1.0), 0.05, r"unit quaternion.*norm 1.41421"),
+        ((math.nan, 0.0, 0.0, 0.0), 0.05, r"unit quaternion, got \[nan"),
+    ],
+)
+def test_every_controller_refuses_a_malformed_trusted_target(
+    name: str,
+    quat: tuple[float, ...],
+    jaw: float,
+    match: str,
+    model: mujoco.MjModel,
+    home_state: ControlState,
+) -> None:
+    """``GripperTarget.trusted`` skips validation; no controller clips or ignores what it lets through."""
+    c = make_controller(name, model)
+    c.reset(home_state)
+    bad = GripperTarget.trusted(np.asarray(HOME), np.array(quat), np.zeros(3), np.zeros(3), jaw)
+    with pytest.raises(CommandError, match=match):
         c.compute(home_state, bad)
 
 
@@ -230,7 +257,8 @@ def test_nan_target_raises_command_error(
     bad = GripperTarget.trusted(entries["p"], entries["quat"], entries["v"], entries["w"], 0.05)
     c = make_controller(name, model)
     c.reset(home_state)
-    with pytest.raises(CommandError, match="target must be finite"):
+    match = "unit quaternion, got \\[nan" if field == "quat" else "target must be finite"
+    with pytest.raises(CommandError, match=match):
         c.compute(home_state, bad)
 
 

@@ -74,3 +74,30 @@ def test_scaled_config_builds_a_working_controller(model: mujoco.MjModel, home_s
     c.reset(home_state)
     ctrl = c.compute(home_state, target(HOME + [0.01, 0.0, 0.0])).ctrl
     assert len(ctrl) == model.nu and np.all(np.isfinite(ctrl))
+
+
+def test_only_the_qp_solvers_failure_is_a_failed_solve(
+    model: mujoco.MjModel, home_state: ControlState, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """mink's NoSolutionFound holds the setpoint and is reported; any other error is a bug and
+    propagates."""
+    import mink
+
+    c = DiffIKController(model, DiffIKConfig())
+    c.reset(home_state)
+
+    def no_solution(q, goal):  # type: ignore[no-untyped-def]
+        raise mink.exceptions.NoSolutionFound("daqp")
+
+    monkeypatch.setattr(c, "ik_velocity", no_solution)
+    out = c.compute(home_state, target(HOME))
+    assert out.diagnostics.status == "qp_failed: NoSolutionFound"
+    assert out.diagnostics.iterations == 0
+
+    def broken(q, goal):  # type: ignore[no-untyped-def]
+        raise ValueError("shapes (7,) and (6,) not aligned")
+
+    monkeypatch.setattr(c, "ik_velocity", broken)
+    c.reset(home_state)
+    with pytest.raises(ValueError, match="not aligned"):
+        c.compute(home_state, target(HOME))
