@@ -266,6 +266,23 @@ def _check_end_record(out: Path, summary: dict[str, Any]) -> None:
     }
 
 
+def _held(
+    controller: str, strategy: str, *task: str, chamfer: float = 1e-3, friction: bool = False
+) -> list[str]:
+    """``peg-sim run`` arguments of a held insertion into a 0.1 mm clearance hole."""
+    args = ["--controller", controller, "--set", "controller.control_dt=0.001"]
+    sets = [
+        "physics.profile=precision",
+        "task.name=held_insertion",
+        f"task.strategy={strategy}",
+        *(f"task.{t}" for t in task),
+        "scene.assets.clearance=1e-4",
+        f"scene.assets.chamfer={chamfer}",
+        *(["scene.peg_friction=[1.0, 0.005, 0.0001]"] if friction else []),
+    ]
+    return args + [arg for item in sets for arg in ("--set", item)]
+
+
 RUNS = {
     "success": ([], 0, ""),
     "timeout": (["--max-steps", "2500"], 1, "timeout"),
@@ -284,6 +301,14 @@ RUNS = {
         "force_spike",
     ),
     "excessive_tilt": (["--set", "success.max_tilt=1e-9"], 1, "excessive_tilt"),
+    # The held-insertion end states, in the precision physics (about 7-9 s each).
+    "wedged": (_held("pd", "spiral", "lateral_error=0.0015", "tilt_error=0.02618"), 1, "wedged"),
+    "missed": (_held("impedance", "force", "lateral_error=0.004", chamfer=0.0), 1, "missed"),
+    "jammed": (  # too little force to push the peg down the bore: it stops in it
+        _held("impedance", "force", "lateral_error=0.0", "insert_force=0.2", friction=True),
+        1,
+        "jammed",
+    ),
 }
 
 
