@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.experiments.stats import ALPHA, compare_arms, episodes_frame, median_ci, wilson_interval
-from peg_ctrl.io import atomic_path, atomic_write_text
+from peg_ctrl.io import atomic_write_text
 from peg_ctrl.monitors import FIRST_CONTACT_N
+from peg_ctrl.plots import pyplot, save_figure
 
 __all__ = [
     "wilson_interval",
@@ -229,9 +230,7 @@ def _controller_colours(arms: list[str]) -> dict[str, Any]:
 
 def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """Draw the report's plots into ``out_dir``; returns (title, file name) of each one drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    pyplot()  # the headless backend, before any figure
 
     df = episodes_frame(rows)
     df["won"] = df["status"] == "success"
@@ -253,16 +252,6 @@ def _plots(out_dir: Path, rows: list[dict[str, Any]], summary: list[dict[str, An
     if traced and "task" in df and (df["task"] == "held_insertion").any():
         made.append(_force_vs_depth(out_dir, df, arms))
     return made
-
-
-def _save(fig: Any, path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp)
-    finally:
-        plt.close(fig)
 
 
 def _episode_dir(out_dir: Path, log_path: Any) -> Path:
@@ -332,7 +321,7 @@ def _force_profiles(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
         )
     fig.supxlabel("time from the first peg-block contact (held insertion) or the insert/release phase [s]")
     fig.supylabel("net contact force [N]")
-    _save(fig, out_dir / "force_profiles.png")
+    save_figure(fig, out_dir / "force_profiles.png")
     return ("Force profiles", "force_profiles.png")
 
 
@@ -390,7 +379,7 @@ def _success_curves(
             handles.setdefault(lab, h)
     fig.legend(list(handles.values()), list(handles), loc="outside upper center", ncol=min(6, len(handles)))
     fig.supylabel("success rate (95 % Wilson interval)")
-    _save(fig, out_dir / name)
+    save_figure(fig, out_dir / name)
     title = "Success rate vs clearance" if name == "success_vs_clearance.png" else "Success vs disturbance"
     return (title, name)
 
@@ -463,7 +452,7 @@ def _peak_force(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
         fontsize=8,
         loc="upper right",
     )
-    _save(fig, out_dir / "peak_force.png")
+    save_figure(fig, out_dir / "peak_force.png")
     return ("Peak contact force", "peak_force.png")
 
 
@@ -492,7 +481,7 @@ def _outcomes(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
     ax.set_title("Outcome per arm: inserted, or the failure reason (phase it ended in)", fontsize=10)
     ax.grid(alpha=0.3, axis="x")
     fig.legend(fontsize=7, loc="outside right upper")
-    _save(fig, out_dir / "failures.png")
+    save_figure(fig, out_dir / "failures.png")
     return ("Outcome per arm", "failures.png")
 
 
@@ -521,7 +510,7 @@ def _force_vs_depth(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(arms) :]:
         ax.set_visible(False)
-    _save(fig, out_dir / "force_vs_depth.png")
+    save_figure(fig, out_dir / "force_vs_depth.png")
     return ("Force against depth", "force_vs_depth.png")
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from peg_ctrl.assets import AssetParams
 from peg_ctrl.config import ConfigError, load, to_dict
 from peg_ctrl.controllers import PDConfig
 from peg_ctrl.controllers.base import ControllerConfig
@@ -35,7 +36,7 @@ from peg_ctrl.errors import FAILURE_REASONS, OutputError, OutputWarning
 from peg_ctrl.io import atomic_write_text, remove_stale_temps, to_json
 from peg_ctrl.jaw import load_default
 from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
-from peg_ctrl.monitors import ContactMonitor, GraspMonitor
+from peg_ctrl.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
 from peg_ctrl.recorders import (
@@ -63,6 +64,7 @@ __all__ = [
     "compiled_model",
     "prepare_model",
     "build_loop",
+    "contact_fields",
 ]
 
 
@@ -410,25 +412,50 @@ def _artefact(what: str, make: Callable[[], str], failed: list[OutputError]) -> 
     return None
 
 
+def contact_fields(
+    loop: Loop, m: InsertionMeasure | None, *, seated: bool, assets: AssetParams
+) -> dict[str, Any]:
+    """The summary fields that the loop's monitors and the insertion measure ``m`` give, by
+    their :class:`EpisodeResult` names: peak forces and penetrations, the resting penetration
+    now, the hole metrics (None when the peg is not at the hole), the contact history (first
+    contact, impulse, largest tilt in contact, search distance) and the end state. Autonomous
+    episodes and teleoperation write them alike."""
+    from peg_ctrl.monitors import episode_end_state
+
+    depth, lateral, tilt = m.hole_metrics() if m is not None else (None, None, None)
+    _, resting = loop.reader.pair_forces(loop.data)
+    contact, history = loop.contact, loop.history
+    first = history.first_contact
+    return {
+        "peak_contact_force_n": contact.peak_block,
+        "peak_any_contact_force_n": contact.peak_any,
+        "insertion_depth_m": depth,
+        "lateral_error_m": lateral,
+        "tilt_rad": tilt,
+        "max_penetration_m": contact.max_penetration,
+        "resting_penetration_m": max(resting),
+        "grip_penetration_m": contact.grip_penetration,
+        "first_contact_s": first,
+        "contact_impulse_ns": history.impulse,
+        "max_tilt_rad": history.max_tilt if first is not None else None,
+        "search_distance_m": history.travel,
+        "end_state": episode_end_state(
+            m, seated=seated, clearance=assets.clearance, chamfer=assets.chamfer, radius=assets.peg_radius
+        ),
+    }
+
+
 def _result(
     cfg: EpisodeConfig, loop: Loop, outcome: LoopOutcome, wall: float, logger: EpisodeLogger
 ) -> EpisodeResult:
-    from peg_ctrl.monitors import episode_end_state
-
     task = loop.task
     insertion = getattr(task, "insertion", None)
     m = insertion.last if insertion is not None else None
-    depth, lateral, tilt = m.hole_metrics() if m is not None else (None, None, None)
-    _, resting = loop.reader.pair_forces(loop.data)
     records = task.records
     grasp = loop.grasp
-    history = loop.history
     time_to_insert = getattr(task, "time_to_insert", None)
-    a = cfg.scene.assets
-    end_state = episode_end_state(
-        m, seated=outcome.status == "success", clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
-    )
-    first = history.first_contact
+    fields = contact_fields(loop, m, seated=outcome.status == "success", assets=cfg.scene.assets)
+    first = fields["first_contact_s"]
     return EpisodeResult(
         status=outcome.status,
         reason=outcome.reason,
@@ -442,24 +469,12 @@ def _result(
         total_timesteps=loop.steps,
         sim_time_s=float(loop.data.time),
         wall_time_s=wall,
-        peak_contact_force_n=loop.contact.peak_block,
-        peak_any_contact_force_n=loop.contact.peak_any,
-        insertion_depth_m=depth,
-        lateral_error_m=lateral,
-        tilt_rad=tilt,
-        max_penetration_m=loop.contact.max_penetration,
-        resting_penetration_m=max(resting),
-        grip_penetration_m=loop.contact.grip_penetration,
+        **fields,
         peg_slip_m=grasp.slip if grasp is not None else 0.0,
         time_to_insert_s=time_to_insert,
-        first_contact_s=first,
         contact_to_seat_s=(
             time_to_insert - first if time_to_insert is not None and first is not None else None
         ),
-        contact_impulse_ns=history.impulse,
-        max_tilt_rad=history.max_tilt if first is not None else None,
-        search_distance_m=history.travel,
-        end_state=end_state,
         detail=outcome.detail,
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),

@@ -99,7 +99,7 @@ from peg_ctrl.errors import CommandError, EpisodeFailure
 from peg_ctrl.loop import Loop, StepInfo
 from peg_ctrl.recorders import FollowCamera
 from peg_ctrl.rotations import quat_mul, rotate_inv
-from peg_ctrl.state import BLOCK_PEG, ft_world
+from peg_ctrl.state import BLOCK_PEG, ControlState, ft_world
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, Task, close_open_record
 
 __all__ = [
@@ -157,10 +157,6 @@ class AgentTask:
     @property
     def records(self) -> list[PhaseRecord]:
         return self._records
-
-    @property
-    def time_to_insert(self) -> float | None:
-        return self.seated.since  # type: ignore[no-any-return]
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
         self.inner.reset(model, data, rng)
@@ -360,7 +356,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         info = self._info(m, success=False, reason="")
         if self.render_mode == "human":
             self.render()
-        return self._observation(), info
+        return self._observation(obs.gripper), info
 
     def step(
         self, action: NDArray[np.float32]
@@ -376,22 +372,22 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         success, reason = False, ""
         try:
             evaluation = self.loop.step()
-            success = evaluation.success
-            terminated = evaluation.done
-        except EpisodeFailure as failure:
+            success, terminated, m = evaluation.success, evaluation.done, evaluation.metrics
+        except EpisodeFailure as failure:  # a monitor ended the step before the task measured it
             self.task.finish(float(self.data.time), failure.reason)
             reason, terminated = failure.reason, True
+            assert self.loop.peg is not None
+            m = self.task.insertion.measure(self.loop.peg)
         self._steps += 1
         truncated = not terminated and self._steps >= self.max_steps
         self._done = terminated or truncated
-        assert self.loop.peg is not None
-        m = self.task.insertion.measure(self.loop.peg)
-        reward, terms = self._reward(m, success)
+        state = self.loop.state()
+        reward, terms = self._reward(success, state)
         info = self._info(m, success=success, reason=reason)
         info["reward_terms"] = terms
         if self.render_mode == "human":
             self.render()
-        return self._observation(), reward, terminated, truncated, info
+        return self._observation(state), reward, terminated, truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode == "rgb_array":
@@ -422,8 +418,8 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         jaw = 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
         return GripperTarget.trusted(p, q, v, rotate_inv(q, w_world), jaw)
 
-    def _observation(self) -> dict[str, NDArray[np.float32]]:
-        s = self.loop.state()
+    def _observation(self, s: ControlState) -> dict[str, NDArray[np.float32]]:
+        """The observation of the gripper state ``s`` (noise-free; sensor noise is added here)."""
         if self.loop.noise is not None:
             s = self.loop.noise.apply(s)
         force, torque = ft_world(s)
@@ -441,7 +437,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             "hole_pos": self.hole_pos.astype(f32),
         }
 
-    def _reward(self, m: Any, success: bool) -> tuple[float, dict[str, float]]:
+    def _reward(self, success: bool, s: ControlState) -> tuple[float, dict[str, float]]:
         if self.reward_mode == "sparse":
             return float(success), {"success": float(success)}
         peg = self.loop.peg
@@ -449,7 +445,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         d_goal = float(np.linalg.norm(peg.bottom_world - self._goal))
         d_reach = 0.0
         if self._reach:
-            d_reach = float(np.linalg.norm(self.loop.state().p_world - peg.p_world))
+            d_reach = float(np.linalg.norm(s.p_world - peg.p_world))
         terms = {
             "goal": -d_goal / DISTANCE_SCALE_M,
             "reach": -d_reach / DISTANCE_SCALE_M,

@@ -23,7 +23,7 @@ import numpy as np
 
 from peg_ctrl.io import atomic_path
 
-__all__ = ["plot_force_profile", "PHASE_COLOURS"]
+__all__ = ["plot_force_profile", "PHASE_COLOURS", "pyplot", "save_figure"]
 
 #: Phase name -> colour of its span (the strip at the top; the panels shade it lighter).
 PHASE_COLOURS = {
@@ -45,6 +45,28 @@ _UNKNOWN_PHASE = "#e0e0e0"
 _GRIP, _INSERT = "gripper-peg", "block-peg"
 
 
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` with the headless Agg backend (every plot of the package is a file)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: str | Path, **savefig: Any) -> Path:
+    """Write ``fig`` to ``path`` atomically (a whole image or none: :func:`~peg_ctrl.io.atomic_path`)
+    and close it, also when writing fails; ``savefig`` goes to ``Figure.savefig``."""
+    path = Path(path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, **savefig)
+    finally:
+        pyplot().close(fig)
+    return path
+
+
 def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: Path) -> Path:
     """Draw an episode's force profile as a PNG and return its path.
 
@@ -55,11 +77,7 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
             phase was still running at the end), as in ``summary.json``.
         out: the PNG to write (its directory is created).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     with np.load(trace_npz) as npz:
         columns = [str(c) for c in npz["columns"]]
         trace = np.asarray(npz["data"], dtype=float)
@@ -155,12 +173,7 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
     fig.suptitle("Contact forces by phase", fontsize=11)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp)
-    finally:
-        plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def _phase_strip(fig: Any, ax: Any, spans: list[tuple[str, float, float]]) -> list[str]:

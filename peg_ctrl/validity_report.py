@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.assets import AssetParams
-from peg_ctrl.io import atomic_write_bytes, atomic_write_text, to_json
+from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.physics import profile
+from peg_ctrl.plots import pyplot, save_figure
 from peg_ctrl.validity import (
     CLEARANCES,
     INSERTED_DEPTH,
@@ -176,27 +177,8 @@ def _markdown(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _pyplot():  # type: ignore[no-untyped-def]
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save_png(fig, path: Path) -> None:  # type: ignore[no-untyped-def]
-    """Write ``fig`` to ``path`` atomically (no torn PNG if interrupted) and close it."""
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    _pyplot().close(fig)
-    atomic_write_bytes(path, buf.getvalue())
-
-
 def _plot_clearance(path: Path, study: dict[str, list[Trial]]) -> None:
-    plt = _pyplot()
+    plt = pyplot()
 
     fig, (ax_rate, ax_depth) = plt.subplots(1, 2, figsize=(11, 4.2))
     for (name, trials), marker in zip(study.items(), "os^", strict=False):
@@ -217,12 +199,12 @@ def _plot_clearance(path: Path, study: dict[str, list[Trial]]) -> None:
     ax_depth.axhline(INSERTED_DEPTH * 1e3, color="0.6", lw=0.8, ls="--")
     fig.suptitle("Held peg pushed with 10 N: outcome against clearance")
     fig.tight_layout()
-    _save_png(fig, path)
+    save_figure(fig, path, format="png", dpi=110)
 
 
 def _plot_force_depth(path: Path, study: dict[str, list[Trial]]) -> None:
     """Contact force against depth for the exact push (trial 0, traced) at each clearance."""
-    plt = _pyplot()
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, len(study), figsize=(5.5 * len(study), 4.2), squeeze=False)
     for ax, (name, trials) in zip(axes[0], study.items(), strict=True):
@@ -238,4 +220,4 @@ def _plot_force_depth(path: Path, study: dict[str, list[Trial]]) -> None:
         ax.grid(alpha=0.3)
         ax.legend(title="clearance", fontsize=8)
     fig.tight_layout()
-    _save_png(fig, path)
+    save_figure(fig, path, format="png", dpi=110)

@@ -24,12 +24,12 @@ import numpy as np
 from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
 from peg_ctrl.config import to_dict
 from peg_ctrl.controllers import ControllerConfig
-from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model
+from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model, contact_fields
 from peg_ctrl.episode_log import EpisodeLogger
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.loop import Loop, StepInfo
-from peg_ctrl.monitors import ContactMonitor, episode_end_state
+from peg_ctrl.monitors import ContactMonitor
 from peg_ctrl.physics import PhysicsConfig
 from peg_ctrl.recorders import StateRecorder, TraceRecorder, step_record
 from peg_ctrl.scene import HOME_KEY, SceneConfig
@@ -210,14 +210,8 @@ class TeleopSession:
             status = "success"
         else:
             status = "interrupted" if reason == "interrupted" else "failure"
-        loop, contact, history = self.loop, self.loop.contact, self.loop.history
-        _, resting = loop.reader.pair_forces(self.data)
-        a = self.scene.assets
-        end_state = episode_end_state(
-            check, seated=inserted, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius
-        )
-        depth, lateral, tilt = check.hole_metrics()
-        tti, first = self.task.time_to_insert, history.first_contact
+        fields = contact_fields(self.loop, check, seated=inserted, assets=self.scene.assets)
+        tti, first = self.task.time_to_insert, fields["first_contact_s"]
         # None unless the peg touched the block before the insertion was detected (the operator
         # may lower it in without touching, then let it fall against the bore).
         to_seat = tti - first if tti is not None and first is not None and first <= tti else None
@@ -234,22 +228,10 @@ class TeleopSession:
             "total_timesteps": self.step_count,
             "sim_time_s": float(self.data.time),
             "wall_time_s": time.perf_counter() - self.wall0,
-            "peak_contact_force_n": contact.peak_block,
-            "peak_any_contact_force_n": contact.peak_any,
-            "insertion_depth_m": depth,
-            "lateral_error_m": lateral,
-            "tilt_rad": tilt,
-            "max_penetration_m": contact.max_penetration,
-            "resting_penetration_m": max(resting),
-            "grip_penetration_m": contact.grip_penetration,
+            **fields,
             "peg_slip_m": None,
             "time_to_insert_s": tti,
-            "first_contact_s": first,
             "contact_to_seat_s": to_seat,
-            "contact_impulse_ns": history.impulse,
-            "max_tilt_rad": history.max_tilt if first is not None else None,
-            "search_distance_m": history.travel,
-            "end_state": end_state,
             "detail": detail or f"session ended: {reason}",
             "log_path": str(self.logger.log_path),
             "trace_path": str(self.logger.trace_path),
