@@ -26,6 +26,7 @@ from peg_ctrl.controllers.diffik import DiffIKConfig, DiffIKController
 from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
 from peg_ctrl.controllers.mpc import MPCConfig, MPCController
 from peg_ctrl.controllers.pd import PDConfig, PDController
+from peg_ctrl.controllers.sampling_mpc import SamplingMPCConfig, SamplingMPCController
 from peg_ctrl.errors import ConfigError, UnknownComponent
 
 __all__ = [
@@ -45,6 +46,8 @@ __all__ = [
     "MPCController",
     "ImpedanceConfig",
     "ImpedanceController",
+    "SamplingMPCConfig",
+    "SamplingMPCController",
     "REGISTRY",
     "UnknownController",
     "controller_names",
@@ -54,7 +57,8 @@ __all__ = [
 
 #: Controller name -> its config class (whose ``build(model)`` makes the controller).
 REGISTRY: dict[str, type[ControllerConfig]] = {
-    cfg.name: cfg for cfg in (PDConfig, ImpedanceConfig, AdmittanceConfig, DiffIKConfig, MPCConfig)
+    cfg.name: cfg
+    for cfg in (PDConfig, ImpedanceConfig, AdmittanceConfig, DiffIKConfig, MPCConfig, SamplingMPCConfig)
 }
 
 #: Kept for callers that catch it by its old name.

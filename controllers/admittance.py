@@ -16,17 +16,35 @@ about the tip::
     commanded pose: turned by phi about the centre of the reference, then shifted by x;
     tracked by the ``pd`` controller.
 
-Force-controlled axes (a non-zero ``target.force_world`` entry) are regulated in closed loop
-with the sensor (an accommodation law): the command along the axis starts at the measured
-position when the axis becomes force-controlled and moves as ``M dd(s) + D_f d(s) = F_ext + f_d``,
-so it comes to rest exactly when the gripper pushes with ``f_d``; ``force_damping`` sets how fast
-(about ``D_f / k_inner`` seconds per unit of force error with the inner PD's stiffness).
+(:mod:`peg_ctrl.sensing` computes ``F_ext`` and ``tau_ext``.) Force-controlled axes
+(``target.force_axes``: flagged in ``target.wrench_axes`` or a non-zero ``target.force_world``
+entry) are regulated in closed loop with the sensor (an accommodation law): the command along the
+axis starts at the measured position when the axis becomes force-controlled and moves as
+``M dd(s) + D_f d(s) = F_ext + f_d``, so it comes to rest exactly when the gripper pushes with
+``f_d`` (zero: it follows whatever pushes it); ``force_damping`` sets how fast (about
+``D_f / k_inner`` seconds per unit of force error with the inner PD's stiffness).
+
+Moment-controlled axes (``target.moment_axes``) turn the command about the centre of compliance
+by an accommodation law of their own, with no spring to the reference::
+
+    d(psi) = clip((lowpass_m(tau_ext) + tau_d) / D_m, +-max_turn_rate)   on those world axes
+
+so the command turns until the contact's moment about the centre is the commanded
+``target.torque_world`` (zero: a held peg pressed on a flat face turns about its tip until its end
+lies flat). The moment filter (``moment_filter_hz``, slower than the force filter) and the rate
+cap keep the loop clear of the hand's own inertial torques, which the sensor reads too. The turn
+``psi`` is dropped on an axis as soon as it is no longer moment-controlled: the task re-anchors
+its reference at the present pose. A tare (``tare_time`` > 0: the mean reading over the first
+seconds after reset, which must be free of contact) removes the sensor bias the model does not
+know (the closed jaw, a held peg): a moment loop would integrate it into a drift.
 
 The acceleration term uses the commanded acceleration of the reference (zero for rest-to-rest
 holds); what is left (accelerations, the held peg's 16 g) stays below the deadbands. The
 gripper's weight and centre of mass below the sensor come from the model at the home pose.
 
-The inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
+:class:`AdmittanceLoop` is the law as an outer loop (target in, shifted target out), so another
+controller can sit inside it (``diffik`` does, with its ``admittance`` field). In ``admittance``
+the inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
 admittance's by :meth:`~peg_ctrl.controllers.base.ControllerConfig.scaled`); it runs at the
 admittance's ``control_dt`` (``inner.control_dt`` is replaced by it), and only its control law
 is called, so saturation and packing happen once.
@@ -45,11 +63,11 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import cross, quat_mul, rotate
-from peg_ctrl.scene import FT_SITE, HOME_KEY
-from peg_ctrl.state import ControlState, ft_world
+from peg_ctrl.rotations import cross, quat_mul, rotate, rotate_inv
+from peg_ctrl.sensing import WristModel, lowpass_alpha
+from peg_ctrl.state import ControlState
 
-__all__ = ["AdmittanceConfig", "AdmittanceController"]
+__all__ = ["AdmittanceConfig", "AdmittanceController", "AdmittanceLoop"]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -59,6 +77,7 @@ class AdmittanceConfig(ControllerConfig):
     name: ClassVar[str] = "admittance"
     GAINS: ClassVar[tuple[str, ...]] = ("stiffness", "rot_stiffness")
     VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time",)
     mass: float = 2.0  # virtual mass [kg]
     stiffness: float = 300.0  # virtual spring to the reference [N/m]
     damping_ratio: float = 1.0  # D = 2 zeta sqrt(K M), translation and rotation
@@ -72,6 +91,10 @@ class AdmittanceConfig(ControllerConfig):
     max_rotation: float = 0.1  # the command never turns further than this [rad]
     compliance_center: tuple[float, float, float] = (0.0, 0.0, 0.0)  # gripper frame [m]
     force_damping: float = 400.0  # D_f of force-controlled axes [N s/m]
+    moment_damping: float = 0.5  # D_m of moment-controlled axes [N m s/rad]
+    max_turn_rate: float = 0.05  # cap on their turn rate [rad/s]
+    moment_filter_hz: float = 5.0  # low-pass on the moment they regulate [Hz]
+    tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
     # [s] 1 kHz: the force regulation on the sensor is rate-sensitive (a held push's median peak
     # force rose from 14 N at 1 kHz to 24 N at 500 Hz and 56 N at 200 Hz; docs/performance.md)
     control_dt: float = 0.001
@@ -81,96 +104,85 @@ class AdmittanceConfig(ControllerConfig):
         return AdmittanceController(model, self)
 
 
-def _lowpass_alpha(hz: float, dt: float) -> float:
-    return 1.0 - math.exp(-2.0 * math.pi * hz * dt)
-
-
 def _deadband(v: np.ndarray, width: float) -> np.ndarray:
     norm = float(np.linalg.norm(v))
     return v * (max(0.0, norm - width) / norm) if norm > 0 else np.zeros(3)
 
 
-class AdmittanceController(ControllerBase[AdmittanceConfig]):
-    """Six-axis admittance with force regulation on top of the reference PD. See the module docstring.
+class AdmittanceLoop:
+    """The admittance law as an outer loop: :meth:`shape` turns a target into the shifted
+    target an inner controller tracks. See the module docstring.
 
     Attributes:
         offset: (3,) Current yield of the command, world frame [m].
         offset_rate: (3,) Its rate [m/s].
         rotation: (3,) Current turn of the command about the centre of compliance, world [rad].
+        turn: (3,) Turn on the moment-controlled axes, world [rad].
         force_filtered: (3,) Low-passed external force, world frame [N].
         torque_filtered: (3,) Low-passed external torque about the centre, world frame [N m].
+        moment_filtered: (3,) The same torque through the slower moment filter [N m].
     """
 
-    name = "admittance"
-
     def __init__(
-        self,
-        model: mujoco.MjModel,
-        config: AdmittanceConfig | None = None,
-        *,
-        jaw_calibration: JawCalibration | None = None,
+        self, model: mujoco.MjModel, config: AdmittanceConfig, *, control_dt: float, bumpless: bool = False
     ) -> None:
-        super().__init__(model, config or AdmittanceConfig(), jaw_calibration=jaw_calibration)
-        c = self.config
-        self.inner = PDController(
-            model, dataclasses.replace(c.inner, control_dt=c.control_dt), jaw_calibration=self._jaw
-        )
-        mount = model.body("gripper_mount").id
-        root = model.body("gripper_root").id
-        self._mass_below = float(model.body_subtreemass[mount])
-        self._gravity = model.opt.gravity.copy()
-        # Sensor site and centre of mass below it, in the gripper frame (home pose, jaw open).
-        scratch = mujoco.MjData(model)
-        mujoco.mj_resetDataKeyframe(model, scratch, model.key(HOME_KEY).id)
-        mujoco.mj_kinematics(model, scratch)
-        mujoco.mj_comPos(model, scratch)
-        r_root = scratch.xmat[root].reshape(3, 3)
-        self._site_body = r_root.T @ (scratch.site_xpos[model.site(FT_SITE).id] - scratch.xpos[root])
-        self._com_body = r_root.T @ (scratch.subtree_com[mount] - scratch.xpos[root])
+        c = self.config = config
+        self.dt = control_dt
+        # A force-controlled axis's command starts at the measured position (the admittance's
+        # own PD) or, bumpless, at the target's (an inner loop with a velocity feed-forward, like
+        # the IK, would otherwise turn the step of its static error into a velocity kick).
+        self.bumpless = bumpless
+        self.wrist = WristModel(model)
         self._centre_body = np.asarray(c.compliance_center, dtype=float)
         self._d = 2.0 * c.damping_ratio * math.sqrt(c.stiffness * c.mass)
         self._d_rot = 2.0 * c.damping_ratio * math.sqrt(c.rot_stiffness * c.rot_inertia)
-        self._alpha = _lowpass_alpha(c.filter_hz, c.control_dt)
-        self.reset_offset()
+        self._alpha = lowpass_alpha(c.filter_hz, control_dt)
+        self._alpha_m = lowpass_alpha(c.moment_filter_hz, control_dt)
+        self.reset(None)
 
-    def reset_offset(self) -> None:
+    def reset(self, state: ControlState | None) -> None:
+        """Zero the offsets, the filters and the tare."""
         self.offset = np.zeros(3)
         self.offset_rate = np.zeros(3)
         self.rotation = np.zeros(3)
         self.rotation_rate = np.zeros(3)
+        self.turn = np.zeros(3)
         self.force_filtered = np.zeros(3)
         self.torque_filtered = np.zeros(3)
+        self.moment_filtered = np.zeros(3)
         self._force_axes = np.zeros(3, dtype=bool)
         self._setpoint = np.zeros(3)  # command along force-controlled axes [m]
         self._setpoint_rate = np.zeros(3)
         self._prev_v_ref: np.ndarray | None = None
-
-    def _reset(self, state: ControlState) -> None:
-        self.reset_offset()
-        self.inner.reset(state)
-
-    def external_force(self, state: ControlState, accel_ref: np.ndarray) -> np.ndarray:
-        """Contact force on the gripper from the sensor, world frame [N] (unfiltered)."""
-        return self.external_wrench(state, accel_ref)[0]
+        self._t0 = state.t if state is not None else 0.0
+        self._tares = 0
+        self._force_bias = np.zeros(3)
+        self._torque_bias_body = np.zeros(3)
 
     def external_wrench(self, state: ControlState, accel_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Contact force [N] and its torque about the centre of compliance [N m], world frame."""
-        f_world, t_world = ft_world(state)
-        f_ext = self._mass_below * (accel_ref - self._gravity) - f_world
-        q = state.quat_world
-        site = rotate(q, self._site_body)  # relative to the pinch point
-        com = rotate(q, self._com_body)
-        centre = rotate(q, self._centre_body)
-        weight = self._mass_below * self._gravity
-        tau = -t_world - cross(com - site, weight) + cross(site - centre, f_ext)
+        """Contact force [N] and its torque about the centre of compliance [N m], world frame
+        (unfiltered; tared once a tare was taken)."""
+        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
+        if self._tares:
+            f_ext = f_ext - self._force_bias
+            tau = tau - rotate(state.quat_world, self._torque_bias_body)
         return f_ext, tau
 
-    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+    def _tare(self, state: ControlState, accel_ref: np.ndarray) -> None:
+        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
+        self._tares += 1
+        self._force_bias += (f_ext - self._force_bias) / self._tares
+        self._torque_bias_body += (rotate_inv(state.quat_world, tau) - self._torque_bias_body) / self._tares
+
+    def shape(self, state: ControlState, target: GripperTarget) -> GripperTarget:
+        """The target shifted by the admittance, for the inner controller."""
         c = self.config
-        dt = c.control_dt
+        dt = self.dt
         v_ref = np.asarray(target.v_world)
         accel_ref = np.zeros(3) if self._prev_v_ref is None else (v_ref - self._prev_v_ref) / dt
         self._prev_v_ref = v_ref.copy()
+        if state.t - self._t0 < c.tare_time:
+            self._tare(state, accel_ref)
         f_ext, tau_ext = self.external_wrench(state, accel_ref)
         a = self._alpha
         self.force_filtered += a * (f_ext - self.force_filtered)
@@ -178,7 +190,7 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
 
         # Translation: spring-damper to the reference, except along force-controlled axes.
         f_cmd = np.asarray(target.force_world)
-        axes = f_cmd != 0.0
+        axes = target.force_axes
         drive = _deadband(np.where(axes, 0.0, self.force_filtered), c.deadband)
         acc = (drive - self._d * self.offset_rate - c.stiffness * self.offset) / c.mass
         self.offset_rate += acc * dt  # semi-implicit Euler
@@ -191,7 +203,8 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
             self.offset_rate[:] = 0.0
         # Force-controlled axes: the setpoint moves until the measured force is the commanded one.
         entering = axes & ~self._force_axes
-        self._setpoint[entering] = state.p_world[entering]
+        start = target.p_world if self.bumpless else state.p_world
+        self._setpoint[entering] = start[entering]
         self._setpoint_rate[entering] = 0.0
         self._force_axes = axes
         if axes.any():
@@ -214,6 +227,13 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
                 self.rotation *= c.max_rotation / angle
                 self.rotation_rate[:] = 0.0
                 angle = c.max_rotation
+        total, turn_rate = self._turn(tau_ext, target)
+        if total is not None:
+            total = total + self.rotation if c.rotational else total
+            angle = float(np.linalg.norm(total))
+            rate = turn_rate + self.rotation_rate if c.rotational else turn_rate
+        else:
+            total, rate = self.rotation, self.rotation_rate
 
         p_ref, q_ref = np.asarray(target.p_world), np.asarray(target.quat_world)
         p_cmd = p_ref + self.offset
@@ -222,15 +242,75 @@ class AdmittanceController(ControllerBase[AdmittanceConfig]):
         omega = np.asarray(target.omega_body)
         if angle > 1e-12:
             q_rot = np.empty(4)
-            mujoco.mju_axisAngle2Quat(q_rot, self.rotation / angle, angle)
+            mujoco.mju_axisAngle2Quat(q_rot, total / angle, angle)
             arm = -rotate(q_ref, self._centre_body)  # pinch point relative to the reference centre
             p_cmd = p_cmd + rotate(q_rot, arm) - arm
             q_cmd = quat_mul(q_rot, q_ref)
-            v_cmd = v_cmd + cross(self.rotation_rate, rotate(q_rot, arm))
+            v_cmd = v_cmd + cross(rate, rotate(q_rot, arm))
             q_inv = np.array([q_cmd[0], -q_cmd[1], -q_cmd[2], -q_cmd[3]])
-            omega = omega + rotate(q_inv, self.rotation_rate)
+            omega = omega + rotate(q_inv, rate)
         if axes.any():
             p_cmd = np.where(axes, self._setpoint, p_cmd)
             v_cmd = np.where(axes, self._setpoint_rate, v_cmd)
-        shifted = GripperTarget.trusted(p_cmd, q_cmd, v_cmd, omega, target.jaw_sep_m)
-        return self.inner.control_law(state, shifted)
+        return GripperTarget.trusted(p_cmd, q_cmd, v_cmd, omega, target.jaw_sep_m)
+
+    def _turn(self, tau_ext: np.ndarray, target: GripperTarget) -> tuple[np.ndarray | None, np.ndarray]:
+        """Advance the turn on the moment-controlled axes; (turn or None when there is none, rate)."""
+        c = self.config
+        axes = target.moment_axes
+        self.moment_filtered += self._alpha_m * (tau_ext - self.moment_filtered)
+        if not axes.any():
+            self.turn[:] = 0.0
+            return None, np.zeros(3)
+        rate = np.clip(
+            (self.moment_filtered + target.torque_world) / c.moment_damping, -c.max_turn_rate, c.max_turn_rate
+        )
+        rate[~axes] = 0.0
+        self.turn[~axes] = 0.0
+        self.turn += rate * self.dt
+        return self.turn.copy(), rate
+
+
+class AdmittanceController(ControllerBase[AdmittanceConfig]):
+    """Six-axis admittance with force regulation on top of the reference PD. See the module docstring.
+
+    ``loop`` is the :class:`AdmittanceLoop`; its state (``offset``, ``rotation``,
+    ``force_filtered``, ...) is readable here too.
+    """
+
+    name = "admittance"
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        config: AdmittanceConfig | None = None,
+        *,
+        jaw_calibration: JawCalibration | None = None,
+    ) -> None:
+        super().__init__(model, config or AdmittanceConfig(), jaw_calibration=jaw_calibration)
+        c = self.config
+        self.inner = PDController(
+            model, dataclasses.replace(c.inner, control_dt=c.control_dt), jaw_calibration=self._jaw
+        )
+        self.loop = AdmittanceLoop(model, c, control_dt=c.control_dt)
+
+    offset = property(lambda self: self.loop.offset)
+    rotation = property(lambda self: self.loop.rotation)
+    turn = property(lambda self: self.loop.turn)
+    force_filtered = property(lambda self: self.loop.force_filtered)
+    torque_filtered = property(lambda self: self.loop.torque_filtered)
+
+    def _reset(self, state: ControlState) -> None:
+        self.loop.reset(state)
+        self.inner.reset(state)
+
+    def external_force(self, state: ControlState, accel_ref: np.ndarray) -> np.ndarray:
+        """Contact force on the gripper from the sensor, world frame [N] (unfiltered)."""
+        return self.loop.external_wrench(state, accel_ref)[0]
+
+    def external_wrench(self, state: ControlState, accel_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contact force [N] and its torque about the centre of compliance [N m], world frame."""
+        return self.loop.external_wrench(state, accel_ref)
+
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+        return self.inner.control_law(state, self.loop.shape(state, target))

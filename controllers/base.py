@@ -35,6 +35,7 @@ __all__ = [
     "ControlOutput",
     "Diagnostics",
     "Effort",
+    "SolveTiming",
     "ActuatorMap",
     "InvalidField",
     "check_target",
@@ -55,6 +56,15 @@ class Diagnostics(NamedTuple):
     solve_time_s: float = 0.0
     status: str = "ok"
     iterations: int = 0
+
+
+class SolveTiming(NamedTuple):
+    """Wall times [s] of one of a controller's optimisers over an episode, and how often it
+    runs (``period_s``, simulated) — for the episode summary (p50/p99, real-time factor)."""
+
+    name: str
+    period_s: float
+    times_s: list[float]
 
 
 class ControlOutput(NamedTuple):
@@ -145,13 +155,14 @@ def check_target(target: GripperTarget) -> None:
         + float(target.omega_body.sum())
         + float(target.jaw_sep_m)
         + float(target.force_world.sum())
+        + float(target.torque_world.sum())
     )
     if not math.isfinite(total):  # a NaN or inf anywhere makes the sum non-finite
         raise CommandError(
             f"target must be finite, got p_world={target.p_world.tolist()}, "
             f"quat_world={target.quat_world.tolist()}, v_world={target.v_world.tolist()}, "
             f"omega_body={target.omega_body.tolist()}, jaw_sep_m={target.jaw_sep_m}, "
-            f"force_world={target.force_world.tolist()}"
+            f"force_world={target.force_world.tolist()}, torque_world={target.torque_world.tolist()}"
         )
 
 
@@ -242,7 +253,7 @@ class ControllerConfig:
         numeric = []
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, (bool, str, ControllerConfig)) or f.name in self.VECTORS:
+            if value is None or isinstance(value, (bool, str, ControllerConfig)) or f.name in self.VECTORS:
                 continue
             if f.name in self.NON_NEGATIVE:
                 if not (_is_number(value) and math.isfinite(value) and value >= 0):
@@ -352,6 +363,10 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
 
     def _reset(self, state: ControlState) -> None:
         """Clear the control law's own memory (filters, integrators, warm starts)."""
+
+    def timings(self) -> list[SolveTiming]:
+        """The wall times of the controller's optimisers since reset (none by default)."""
+        return []
 
     @abc.abstractmethod
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:

@@ -10,8 +10,15 @@ mink runs on the robot-only model (base stack + gripper, fingers held open); the
 unlimited (mink's configuration limit would otherwise treat its range as a total-angle bound).
 Limits are built once, not per call.
 
-Force-controlled axes (a non-zero ``target.force_world`` entry) are handed to the inner PD, which
-pushes with the commanded force open loop along them (see :mod:`peg_ctrl.controllers.pd`).
+Force- and moment-controlled axes (``target.wrench_axes``, or a non-zero ``target.force_world``
+entry) are handed to the inner PD, which realises them open loop (see
+:mod:`peg_ctrl.controllers.pd`) — unless the ``admittance`` field sets an admittance outer loop on
+the force/torque sensor (:class:`~peg_ctrl.controllers.admittance.AdmittanceLoop`): then every
+control step the admittance law turns the target (its force- and moment-controlled axes
+included) into a shifted pose, closed loop on the sensor about the ``compliance_center`` it
+names (the held peg's tip), and the IK tracks that pose. The outer loop runs at the controller's
+``control_dt``; the IK at ``ik_dt``. (The admittance config's own ``inner`` and ``control_dt``
+are not used there.)
 
 The inner ``pd`` controller is configured by the ``inner`` field (its gains are scaled with the
 IK costs by :meth:`~peg_ctrl.controllers.base.ControllerConfig.scaled`); it runs at the
@@ -22,6 +29,7 @@ is called, so saturation and packing happen once.
 from __future__ import annotations
 
 import dataclasses
+import time
 from typing import ClassVar
 
 import mujoco
@@ -29,11 +37,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceLoop
 from peg_ctrl.controllers.base import (
     ControllerBase,
     ControllerConfig,
     Effort,
     InvalidField,
+    SolveTiming,
     check_multiple,
     check_target,
 )
@@ -61,6 +71,7 @@ class DiffIKConfig(ControllerConfig):
     v_max: float = 0.5  # slide velocity limit [m/s]
     omega_max: float = 1.5  # ball joint velocity limit [rad/s]
     inner: PDConfig = PDConfig()  # tracks the IK setpoint; its control_dt is replaced by ours
+    admittance: AdmittanceConfig | None = None  # an outer admittance loop on the F/T sensor
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -117,6 +128,12 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
         self._q = self.robot.qpos0.copy()
         self._v = np.zeros(self.robot.nv)
         self._count = 0
+        self.solve_times: list[float] = []  # wall time of every QP solve [s]
+        self.outer = (
+            AdmittanceLoop(model, c.admittance, control_dt=c.control_dt, bumpless=True)
+            if c.admittance is not None
+            else None
+        )
 
     def _reset(self, state: ControlState) -> None:
         self._q = self.robot.qpos0.copy()
@@ -125,6 +142,12 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
         self._v = np.zeros(self.robot.nv)
         self._count = 0
         self.inner.reset(state)
+        if self.outer is not None:
+            self.outer.reset(state)
+        self.solve_times = []
+
+    def timings(self) -> list[SolveTiming]:
+        return [SolveTiming("ik_qp", self.config.ik_dt, self.solve_times)]
 
     def ik_velocity(self, q: NDArray[np.float64], target: GripperTarget) -> NDArray[np.float64]:
         """One IK step: joint velocities (nv,) moving configuration ``q`` towards ``target``."""
@@ -145,8 +168,12 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
 
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         status = "hold"
+        if self.outer is not None:
+            check_target(target)
+            target = self.outer.shape(state, target)
         if self._count % self._every == 0:
             check_target(target)  # a failed QP would otherwise hide a non-finite target
+            t0 = time.perf_counter()
             try:
                 self._v = self.ik_velocity(self._q, target)
                 status = "ok"
@@ -154,11 +181,19 @@ class DiffIKController(ControllerBase[DiffIKConfig]):
                 # hold the setpoint, reported in the diagnostics; any other error propagates
                 self._v = np.zeros(self.robot.nv)
                 status = f"qp_failed: {type(exc).__name__}"
+            self.solve_times.append(time.perf_counter() - t0)
             self.configuration.update(self._q)
             self._q = self.configuration.integrate(self._v, self.config.ik_dt)
         self._count += 1
         setpoint = GripperTarget.trusted(
-            self._q[:3], self._q[3:7], self._v[:3], self._v[3:6], target.jaw_sep_m, target.force_world
+            self._q[:3],
+            self._q[3:7],
+            self._v[:3],
+            self._v[3:6],
+            target.jaw_sep_m,
+            target.force_world,
+            torque_world=target.torque_world,
+            wrench_axes=target.wrench_axes,
         )
         effort = self.inner.control_law(state, setpoint)
         return Effort(effort.force_world, effort.torque_body, status, 1 if status == "ok" else 0)

@@ -11,8 +11,11 @@ so a force at the peg tip translates the peg without turning it, and a moment ab
 it about the tip with the rotational stiffness ``K_r``: a low ``k_rot`` with the centre at the
 tip lets a tilted peg align with the hole as it is pushed in.
 
-Force-controlled axes (a non-zero ``target.force_world`` entry): the spring term of ``F`` along
-the axis is replaced by the commanded force (implicit force control, open loop).
+Force-controlled axes (``target.force_axes``): the spring term of ``F`` along the axis is replaced
+by the commanded force (implicit force control, open loop). Moment-controlled axes
+(``target.moment_axes``, world axes): the rotational spring about those axes is replaced by the
+commanded ``target.torque_world`` about the centre of compliance, open loop (the damping stays;
+``damping_compensation`` decides how freely the wrist then turns).
 
 ``K`` per axis; ``D = 2 zeta sqrt(K m)`` from a damping ratio and the apparent mass/inertia at the
 pinch point (Pinocchio's mass matrix at the home pose). ``b`` are gravity and Coriolis forces
@@ -115,17 +118,23 @@ class ImpedanceController(ControllerBase[ImpedanceConfig]):
         de[3:] = target.omega_body - state.omega_body
         wrench = self._k * e
         f = np.asarray(target.force_world)
-        forced = f != 0.0
-        if target.force_controlled:  # the position error along a force-controlled axis is ignored
+        controlled = target.force_controlled
+        forced = target.force_axes if controlled else f != 0.0
+        if controlled:  # the position error along a force-controlled axis is ignored
             wrench[:3][forced] = 0.0
         norm = float(np.linalg.norm(wrench[:3]))
         if norm > self._cap:
             wrench[:3] *= self._cap / norm
-        if target.force_controlled:
+        if controlled:
             wrench[:3][forced] = f[forced]
+        moments = controlled and bool(target.moment_axes.any())
+        spring_world = rotate(q, wrench[3:]) if moments else None
         wrench += self._d * de
         force = wrench[:3]
         torque = rotate(q, wrench[3:]) + cross(r, force)  # about the pinch point, world
+        if spring_world is not None:  # the commanded moment about the centre replaces the spring
+            axes = target.moment_axes
+            torque[axes] += np.asarray(target.torque_world)[axes] - spring_world[axes]
         jac = self.dynamics.pinch_jacobian(state.p_world, q)
         # J maps (v, omega_body) to world twist; the angular rows act on body rates through R.
         tau = jac.T @ np.concatenate([force, torque])

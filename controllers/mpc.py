@@ -18,14 +18,26 @@ outside the QP and the joint damping by ``u_ff``, so in quasi-static contact ``d
 the gripper exerts: the QP plans every motion knowing that it may never push harder than the
 limit (a stiff position tracker otherwise; impacts add their own, brief, force).
 
-Force-controlled axes (a non-zero ``target.force_world`` entry ``f``): the reference along the
-axis is put ``REACH`` beyond the current position in the direction of ``f`` and the effort bound
-becomes ``[min(0, f), max(0, f)]`` (``f`` clipped to the force limit): pressed against a surface
-the QP saturates at exactly ``f``; moving freely it is still held to the velocity box.
+Force-controlled axes (``target.force_axes``, force ``f``): the reference along the axis is put
+``REACH`` beyond the current position in the direction of ``f`` (no position error for ``f = 0``)
+and the effort bound becomes ``[min(0, f), max(0, f)]`` (``f`` clipped to the force limit):
+pressed against a surface the QP saturates at exactly ``f``; moving freely it is still held to
+the velocity box. Moment-controlled axes (``target.moment_axes``): the orientation error about
+them is dropped and the commanded ``target.torque_world`` (about the pinch point) added outside
+the QP, open loop.
 
 The QP's Hessian and constraint matrix are constant: CasADi's ``conic`` interface is built once
 and re-solved with new linear terms and bounds, warm-started from the previous solution. Default
 solver qpOASES (``osqp`` selectable). Runs every ``mpc_dt`` (default 10 ms, 100 Hz), zero-order hold between.
+
+``formulation: contact`` (the default is ``effort``, all of the above) adds a model of the contact
+in front of it: every ``contact_dt`` (default: every control step) a second QP
+(:mod:`peg_ctrl.controllers.contact_mpc`) plans the wrench-controlled axes of the target on the
+force/torque sensor's reading — force tracking along the force axes with the contact-force budget
+``force_limit`` as a constraint on the *predicted* force, moments about the centre of compliance
+(``compliance_center``, the held peg's tip) turning the command about the tip — and the effort
+QP above tracks the pose it plans. Its contact model's stiffness along the force axes is the
+effort QP's own position stiffness (the LQR gain), unless ``contact_stiffness`` says otherwise.
 """
 
 from __future__ import annotations
@@ -52,11 +64,14 @@ from peg_ctrl.controllers.base import (
     Diagnostics,
     Effort,
     InvalidField,
+    SolveTiming,
     check_multiple,
     check_target,
 )
+from peg_ctrl.controllers.contact_mpc import ContactLoop, ContactSettings
 from peg_ctrl.controllers.dynamics import BaseDynamics
 from peg_ctrl.jaw import JawCalibration
+from peg_ctrl.rotations import rotate, rotate_inv
 from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
 from peg_ctrl.state import ControlState
 
@@ -64,6 +79,7 @@ __all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
 
 _NAN3 = (math.nan, math.nan, math.nan)
 REACH = 0.01  # a force-controlled axis's reference lies this far beyond the gripper [m]
+FORMULATIONS = ("effort", "contact")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -72,6 +88,8 @@ class MPCConfig(ControllerConfig):
 
     name: ClassVar[str] = "mpc"
     GAINS: ClassVar[tuple[str, ...]] = ("q_pos", "q_rot")
+    VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time", "contact_smoothing")
     horizon: int = 15  # steps
     control_dt: float = 0.005  # [s] 200 Hz: outcomes as at 1 kHz (docs/performance.md)
     mpc_dt: float = 0.01  # [s], a whole multiple of control_dt
@@ -85,14 +103,51 @@ class MPCConfig(ControllerConfig):
     omega_max: float = 2.0  # angular velocity box [rad/s]
     solver: str = "qpoases"  # qpoases or osqp
     force_limit: float = 1000.0  # bound on the net slide effort [N] (default: above the actuators' range)
+    # The contact formulation (module docstring, peg_ctrl.controllers.contact_mpc).
+    formulation: str = "effort"  # effort, or contact: plans the wrench-controlled axes on the sensor
+    compliance_center: tuple[float, float, float] = (0.0, 0.0, 0.0)  # gripper frame [m]
+    contact_stiffness: float | None = None  # modelled contact stiffness, force axes [N/m]; None: the LQR's
+    contact_rot_stiffness: float = 2.0  # modelled contact stiffness, moment axes [N m/rad]
+    contact_dt: float | None = None  # the contact QP's period [s], a multiple of control_dt; None: control_dt
+    contact_horizon: int = 10  # steps of contact_dt
+    contact_smoothing: float = 0.1  # weight on the planned wrench's increments, relative
+    # Accommodation of the rate bound along the force axes x, y, z [N s/m]: a larger D on the
+    # lateral axes keeps a peg that a bore guides from rattling between its walls.
+    force_damping: tuple[float, float, float] = (400.0, 400.0, 400.0)
+    moment_damping: float = 0.5  # ... moment axes [N m s/rad]
+    max_contact_speed: float = 0.01  # cap on the command's speed along the force axes [m/s]
+    max_turn_rate: float = 0.05  # ... and its turn rate about the moment axes [rad/s]
+    contact_solver: str = "daqp"  # a qpsolvers solver for the contact QP
+    tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
+    force_filter_hz: float = 20.0  # low-pass on the sensed force [Hz]
+    moment_filter_hz: float = 5.0  # low-pass on the sensed moment [Hz]
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.horizon, int) and not isinstance(self.horizon, bool) and self.horizon >= 2):
-            raise InvalidField(self.name, "horizon", f"must be an integer >= 2, got {self.horizon!r}")
+        for field in ("horizon", "contact_horizon"):
+            value = getattr(self, field)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 2):
+                raise InvalidField(self.name, field, f"must be an integer >= 2, got {value!r}")
         super().__post_init__()
         if self.solver not in ("qpoases", "osqp"):
             raise InvalidField(self.name, "solver", f"must be one of 'qpoases', 'osqp', got {self.solver!r}")
+        if self.formulation not in FORMULATIONS:
+            raise InvalidField(
+                self.name,
+                "formulation",
+                f"must be one of {', '.join(map(repr, FORMULATIONS))}, got {self.formulation!r}",
+            )
+        import qpsolvers
+
+        if self.contact_solver not in qpsolvers.available_solvers:
+            raise InvalidField(
+                self.name,
+                "contact_solver",
+                f"{self.contact_solver!r} is not installed; available: "
+                f"{', '.join(sorted(qpsolvers.available_solvers))}",
+            )
         check_multiple(self, "mpc_dt")
+        if self.contact_dt is not None:
+            check_multiple(self, "contact_dt")
 
     def build(self, model: mujoco.MjModel) -> MPCController:
         return MPCController(model, self)
@@ -229,10 +284,35 @@ class MPCController(ControllerBase[MPCConfig]):
         self._warm_lam_a = np.zeros(len(vel_rows))
         self._count = 0
         self._err = np.zeros(3)
+        self._quat = np.array([1.0, 0.0, 0.0, 0.0])
         self.last_solve = Diagnostics()
         with _quiet_stdout():  # ... or on its first solve
             self.solve(np.zeros(12), np.zeros(6), np.zeros(6))
         self.reset_warm_start()
+        self.contact = self._contact_loop(model) if c.formulation == "contact" else None
+        self._contact_every = check_multiple(c, "contact_dt") if c.contact_dt is not None else 1
+        self.solve_times: list[float] = []  # wall time of every QP solve [s]
+
+    def _contact_loop(self, model: mujoco.MjModel) -> ContactLoop:
+        c = self.config
+        k_pos = -float(self.k_lqr[0, 0])  # the effort QP's position stiffness [N/m]
+        k_force = c.contact_stiffness if c.contact_stiffness is not None else k_pos
+        settings = ContactSettings(
+            centre_body=c.compliance_center,
+            stiffness=(k_force,) * 3 + (c.contact_rot_stiffness,) * 3,
+            damping=(*c.force_damping, *(c.moment_damping,) * 3),
+            rate_cap=(c.max_contact_speed,) * 3 + (c.max_turn_rate,) * 3,
+            rate_min=(0.01 * c.max_contact_speed,) * 3 + (0.01 * c.max_turn_rate,) * 3,
+            budget=c.force_limit,
+            smoothing=c.contact_smoothing,
+            horizon=c.contact_horizon,
+            dt=c.contact_dt if c.contact_dt is not None else c.control_dt,
+            solver=c.contact_solver,
+            tare_time=c.tare_time,
+            force_filter_hz=c.force_filter_hz,
+            moment_filter_hz=c.moment_filter_hz,
+        )
+        return ContactLoop(model, settings, control_dt=c.control_dt)
 
     def reset_warm_start(self) -> None:
         self._warm_x[:] = 0.0
@@ -243,6 +323,17 @@ class MPCController(ControllerBase[MPCConfig]):
         self._u[:] = 0.0
         self.reset_warm_start()
         self._count = 0
+        if self.contact is not None:
+            self.contact.reset(state)
+        self.solve_times = []
+
+    def timings(self) -> list[SolveTiming]:
+        c = self.config
+        out = [SolveTiming("effort_qp", c.mpc_dt, self.solve_times)]
+        if self.contact is not None:
+            period = c.contact_dt if c.contact_dt is not None else c.control_dt
+            out.append(SolveTiming("contact_qp", period, self.contact.solve_times))
+        return out
 
     def _effort_bounds(
         self, target: GripperTarget, z0: NDArray[np.float64]
@@ -254,15 +345,21 @@ class MPCController(ControllerBase[MPCConfig]):
         hi = np.full(6, np.inf)
         lo[:3], hi[:3] = -limit, limit
         if target.force_controlled:
-            for i, f in enumerate(target.force_world.tolist()):
-                if f:
-                    f = max(-limit, min(limit, f))  # never beyond the limit
-                    z0[2 * i] = math.copysign(REACH, f)
+            forces = target.force_world.tolist()
+            for i, on in enumerate(target.force_axes.tolist()):
+                if on:
+                    f = max(-limit, min(limit, forces[i]))  # never beyond the limit
+                    z0[2 * i] = math.copysign(REACH, f) if f else 0.0
                     lo[i], hi[i] = min(0.0, f), max(0.0, f)
+            if target.moment_axes.any():  # no orientation error about the moment-controlled axes
+                err_world = rotate(self._quat, z0[6::2])
+                err_world[target.moment_axes] = 0.0
+                z0[6::2] = rotate_inv(self._quat, err_world)
         return lo, hi
 
     def error_state(self, state: ControlState, target: GripperTarget) -> NDArray[np.float64]:
         """``z0`` (12,): per DoF (position or orientation error, velocity error)."""
+        self._quat = state.quat_world
         mujoco.mju_subQuat(self._err, target.quat_world, state.quat_world)
         pos = np.concatenate([target.p_world - state.p_world, self._err])
         vel = np.concatenate([target.v_world - state.v_world, target.omega_body - state.omega_body])
@@ -313,6 +410,14 @@ class MPCController(ControllerBase[MPCConfig]):
         return x[:6]
 
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+        contact_status = ""
+        if self.contact is not None:
+            solving = self._count % self._contact_every == 0
+            check_target(target)
+            target = self.contact.shape(state, target, solve=solving)
+            last = self.contact.last
+            if solving and last is not None and last.status != "ok":
+                contact_status = f"contact_{last.status}"
         v_ref = np.concatenate([target.v_world, target.omega_body])
         u_ff = self.damping * v_ref
         status, iterations = "hold", 0
@@ -333,10 +438,15 @@ class MPCController(ControllerBase[MPCConfig]):
                 self._u = np.clip(-self.k_lqr @ z0, bounds[0], bounds[1])
                 status = f"qp_failed: {exc}".splitlines()[0]
             self.last_solve = Diagnostics(time.perf_counter() - t0, status, iterations)
+            self.solve_times.append(self.last_solve.solve_time_s)
         self._count += 1
         tau = (
             u_ff
             + self._u
             + self.dynamics.bias(state.p_world, state.quat_world, state.v_world, state.omega_body)
         )
+        if target.force_controlled and target.moment_axes.any():  # the commanded moment, open loop
+            tau[3:] += rotate_inv(state.quat_world, np.where(target.moment_axes, target.torque_world, 0.0))
+        if contact_status and status == "ok":
+            status = contact_status
         return Effort(tau[:3].tolist(), tau[3:].tolist(), status, iterations)

@@ -8,9 +8,13 @@ Slides (world frame)::
 ``v_max`` (a soft velocity cap); ``b`` is the slide damping of the model (a feed-forward that
 cancels it along the reference), ``m g`` the weight of the gripper subtree.
 
-Force-controlled axes (a non-zero ``target.force_world`` entry): the stiffness term is replaced
-by the commanded force, open loop (no force feedback; the damping term stays), so in quasi-static
-contact the gripper pushes with that force.
+Force-controlled axes (``target.force_axes``: a non-zero ``target.force_world`` entry, or an axis
+flagged in ``target.wrench_axes``): the stiffness term is replaced by the commanded force, open
+loop (no force feedback; the damping term stays), so in quasi-static contact the gripper pushes
+with that force. Moment-controlled axes (``target.moment_axes``, world axes): the orientation
+error about those axes is dropped and the commanded ``target.torque_world`` (about the pinch
+point: this controller has no other centre) is added, open loop; the angular-velocity loop still
+damps them.
 
 Ball joint (gripper frame, as MuJoCo's ball-joint velocities are)::
 
@@ -116,9 +120,11 @@ class PDController(ControllerBase[PDConfig]):
         kp, kd = cfg.kp_pos, cfg.kd_pos
         ex, ey, ez = kp * (tx - px), kp * (ty - py), kp * (tz - pz)
         fdx = fdy = fdz = 0.0
-        if target.force_controlled:  # the position error along a force-controlled axis is ignored
+        wrench = target.force_controlled
+        if wrench:  # the position error along a force-controlled axis is ignored
             fdx, fdy, fdz = target.force_world.tolist()
-            ex, ey, ez = (0.0 if fdx else ex), (0.0 if fdy else ey), (0.0 if fdz else ez)
+            free_x, free_y, free_z = target.force_axes.tolist()
+            ex, ey, ez = (0.0 if free_x else ex), (0.0 if free_y else ey), (0.0 if free_z else ez)
         norm = math.sqrt(ex * ex + ey * ey + ez * ez)
         if norm > self._slide_cap:
             scale = self._slide_cap / norm
@@ -150,6 +156,9 @@ class PDController(ControllerBase[PDConfig]):
             thx, thy, thz = k * ex, k * ey, k * ez
         else:
             thx = thy = thz = 0.0
+        moments = wrench and bool(target.moment_axes.any())
+        if moments:  # no orientation error about the moment-controlled world axes
+            thx, thy, thz = _drop_world_axes(qw, qx, qy, qz, (thx, thy, thz), target.moment_axes.tolist())
         fwx, fwy, fwz = target.omega_body.tolist()
         kr = cfg.k_rot
         wx, wy, wz = fwx + kr * thx, fwy + kr * thy, fwz + kr * thz
@@ -171,6 +180,11 @@ class PDController(ControllerBase[PDConfig]):
             tqx += bx * wx + gtx
             tqy += by * wy + gty
             tqz += bz * wz + gtz
+        if moments:  # the commanded moment on those axes, open loop, into the gripper frame
+            torques, axes = target.torque_world.tolist(), target.moment_axes.tolist()
+            mx_, my_, mz_ = (t if on else 0.0 for t, on in zip(torques, axes, strict=True))
+            cx_, cy_, cz_ = _rotate(qw, -qx, -qy, -qz, mx_, my_, mz_)
+            tqx, tqy, tqz = tqx + cx_, tqy + cy_, tqz + cz_
         return Effort((fx, fy, fz), (tqx, tqy, tqz))
 
     def _gravity_torque(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
@@ -183,6 +197,15 @@ class PDController(ControllerBase[PDConfig]):
         bx, by, bz = _rotate(qw, -qx, -qy, -qz, gx, gy, gz)
         cx, cy, cz = self._com_body
         return (-(cy * bz - cz * by), -(cz * bx - cx * bz), -(cx * by - cy * bx))
+
+
+def _drop_world_axes(
+    qw: float, qx: float, qy: float, qz: float, v_body: tuple[float, float, float], axes: list[bool]
+) -> tuple[float, float, float]:
+    """``v_body`` (a gripper-frame vector) without its components along the flagged world axes."""
+    wx, wy, wz = _rotate(qw, qx, qy, qz, *v_body)
+    wx, wy, wz = (0.0 if axes[0] else wx), (0.0 if axes[1] else wy), (0.0 if axes[2] else wz)
+    return _rotate(qw, -qx, -qy, -qz, wx, wy, wz)
 
 
 def _rotate(

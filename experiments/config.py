@@ -67,6 +67,9 @@ class ExperimentConfig:
     success: SuccessConfig = SuccessConfig()
     physics: PhysicsConfig = PhysicsConfig()
     strategies: tuple[str, ...] = ()  # task.strategy values to cross; empty: the task's own
+    # Which strategies each controller (by its label: its name, unless it appears twice) meets;
+    # a controller not listed meets every one of ``strategies``.
+    arms: dict[str, Any] = dataclasses.field(default_factory=dict)
     scene: SceneConfig = SceneConfig()  # the base scene; ``clearances`` replaces its clearance
     grid: dict[str, Any] = dataclasses.field(default_factory=dict)  # dotted key -> list of values
 
@@ -105,6 +108,7 @@ class ExperimentConfig:
                     )
             if len(set(self.strategies)) != len(self.strategies):
                 raise ConfigError("strategies: repeated strategies")
+        self._check_arms()
         for key, values in self.grid.items():
             if not isinstance(key, str) or not key:
                 raise ConfigError(f"grid: keys must be dotted field names, got {key!r}")
@@ -122,6 +126,29 @@ class ExperimentConfig:
         )
         for cell in cells(self):
             _apply_cell(base, cell)
+
+    def _check_arms(self) -> None:
+        labels = [_controller_label(c, self.controllers) for c in self.controllers]
+        for label, chosen in self.arms.items():
+            if label not in labels:
+                raise ConfigError(
+                    f"arms.{label}: no such controller; the controllers are {', '.join(labels)}"
+                )
+            if not self.strategies:
+                raise ConfigError(f"arms.{label}: arms choose among strategies; list them in strategies")
+            if not isinstance(chosen, list) or not chosen:
+                raise ConfigError(f"arms.{label}: expected a non-empty list of strategies, got {chosen!r}")
+            for name in chosen:
+                if name not in self.strategies:
+                    raise ConfigError(
+                        f"arms.{label}: {name!r} is not one of the experiment's strategies "
+                        f"({', '.join(self.strategies)})"
+                    )
+
+    def strategies_for(self, label: str) -> tuple[str, ...]:
+        """The strategies the controller labelled ``label`` meets, in ``strategies``' order."""
+        chosen = self.arms.get(label)
+        return tuple(s for s in self.strategies if chosen is None or s in chosen)
 
 
 _NOT_IN_GRID = ("controller", "seed", "planner", "task.strategy", "task.name", "scene.assets.clearance")
@@ -227,9 +254,11 @@ def expand(exp: ExperimentConfig) -> list[Job]:
     """Every episode of the experiment, in a fixed order (controller, strategy, planner,
     clearance, grid cell, seed)."""
     jobs = []
-    strategies: tuple[str, ...] = exp.strategies or (str(getattr(exp.task, "strategy", "")),)
     for spec in exp.controllers:
         label = _controller_label(spec, exp.controllers)
+        strategies = (
+            exp.strategies_for(label) if exp.strategies else (str(getattr(exp.task, "strategy", "")),)
+        )
         for strategy in strategies:
             for planner in exp.planners:
                 for clearance in exp.clearances:

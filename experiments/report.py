@@ -641,6 +641,59 @@ def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
+_COST_COLUMNS = (
+    "control_time_p50_s",
+    "control_time_p99_s",
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_period_s",
+    "solve_real_time_factor",
+)
+
+
+def _cost_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Wall time of the controller per control step, and of its optimiser per solve, per arm."""
+    import pandas as pd
+
+    df = episodes_frame(rows)
+    if "control_time_p50_s" not in df:
+        return []
+    for column in _COST_COLUMNS:
+        values = df[column].replace("", np.nan) if column in df else np.nan
+        df[column] = pd.to_numeric(values, errors="coerce")
+    if df["control_time_p50_s"].isna().all():
+        return []
+    lines = [
+        "## What the control costs",
+        "",
+        "Wall time per control step (the controller's whole update) and, for the controllers that "
+        "solve an optimisation problem, per solve (a QP, a replan), on one core of the machine that "
+        "ran the sweep: the median over the arm's episodes of each episode's p50 and p99, and the "
+        "largest p99. Real-time factor: the mean solve time over the solve period (below 1: the "
+        "optimiser keeps up with its own rate).",
+        "",
+        "| arm | control step p50 [µs] | p99 [µs] | solve period [ms] | solve p50 [µs] | solve p99 "
+        "[µs] (largest) | real-time factor |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for arm, group in df.groupby("arm", sort=False):
+        us = 1e6 * group[list(_COST_COLUMNS[:4])].median()
+        solve = group["solve_period_s"].dropna()
+        if solve.empty:
+            solver = "– | – | – | –"
+        else:
+            largest = 1e6 * group["solve_time_p99_s"].max()
+            solver = (
+                f"{1e3 * solve.median():g} | {us['solve_time_p50_s']:.0f} | "
+                f"{us['solve_time_p99_s']:.0f} ({largest:.0f}) | "
+                f"{group['solve_real_time_factor'].median():.2f}"
+            )
+        lines.append(
+            f"| {arm} | {us['control_time_p50_s']:.0f} | {us['control_time_p99_s']:.0f} | {solver} |"
+        )
+    return [*lines, ""]
+
+
 def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
     head = "| " + " | ".join(title for _, title in columns) + " |"
     rule = "|" + "|".join("---" for _ in columns) + "|"
@@ -711,6 +764,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         "",
         *_cell_section(rows),
         *_comparison_section(rows),
+        *_cost_section(rows),
     ]
     if rows and "force_profiles.png" not in {name for _, name in plots}:
         parts += [

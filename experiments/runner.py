@@ -59,6 +59,13 @@ _SUMMARY_COLUMNS = (
     "total_timesteps",
     "sim_time_s",
     "wall_time_s",
+    "control_time_p50_s",
+    "control_time_p99_s",
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_period_s",
+    "solve_real_time_factor",
+    "phantom_contacts",
 )
 
 EPISODE_COLUMNS = (
@@ -293,7 +300,7 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
                 "clearance_m": job.clearance,
                 "seed": job.seed,
                 **draw,
-                **{name: s[name] for name in _SUMMARY_COLUMNS},
+                **{name: s.get(name) for name in _SUMMARY_COLUMNS},
                 "log_path": str(Path("episodes") / job.key / "log.jsonl"),
                 **job.cell,
             }

@@ -4,8 +4,18 @@ Importing the package registers the Gymnasium environment ``peg_ctrl/PegInsertio
 (:mod:`peg_ctrl.gym_env`, imported only when the environment is made).
 """
 
-from gymnasium.envs.registration import register as _register
-from gymnasium.envs.registration import registry as _registry
+import os as _os
+
+# One BLAS thread unless the user says otherwise: the controllers solve small problems every
+# millisecond, where a threaded BLAS only spins. CasADi's qpOASES loads its own OpenBLAS, whose
+# idle threads busy-wait: measured on 2 cores, 44 s of system time in 4 mpc episodes against
+# 1 s with one thread (docs/controllers.md). Read when each BLAS library loads, so set before
+# numpy (and CasADi's plugin) are imported.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    _os.environ.setdefault(_var, "1")
+
+from gymnasium.envs.registration import register as _register  # noqa: E402
+from gymnasium.envs.registration import registry as _registry  # noqa: E402
 
 __version__ = "0.1.0"
 

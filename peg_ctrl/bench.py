@@ -37,7 +37,7 @@ from peg_ctrl.episode_log import EpisodeLogger
 from peg_ctrl.loop import Loop, LoopTimer, Recorder, StepInfo
 from peg_ctrl.recorders import StepLogRecorder, TraceRecorder
 
-__all__ = ["bench_episode", "bench_throughput", "bench_profiles", "run_benchmarks", "BENCH_TASKS"]
+__all__ = ["bench_episode", "bench_throughput", "bench_profiles", "bench_qp", "run_benchmarks", "BENCH_TASKS"]
 
 BENCH_TASKS = ("default", "contact")  # peg_ctrl.profile_check.TASKS
 TARGET_OVERHEAD = 0.10
@@ -331,3 +331,135 @@ def run_benchmarks(
     }
     atomic_write_text(out, to_json(results, indent=2) + "\n")
     return results
+
+
+# -- the MPC's QPs: which solver is fastest on them ---------------------------------------------
+
+
+def _contact_instances(count: int, seed: int) -> list[tuple[Any, Any, Any]]:
+    """Contact-QP instances like an insertion's: (axes, measured, wanted), 1 to 5 active axes."""
+    rng = np.random.default_rng(seed)
+    masks = [
+        (False, False, True, False, False, False),  # press
+        (False, False, True, True, True, False),  # press and turn flat
+        (True, True, True, False, False, False),  # press, guided laterally
+        (True, True, True, True, True, False),
+    ]
+    out = []
+    for i in range(count):
+        axes = np.array(masks[i % len(masks)])
+        measured = np.concatenate(
+            [rng.normal(0.0, 1.0, 2), [rng.uniform(0.0, 12.0)], rng.normal(0.0, 0.02, 3)]
+        )
+        wanted = np.array([0.0, 0.0, rng.choice([0.6, 3.0]), 0.0, 0.0, 0.0])
+        out.append((axes, measured, wanted))
+    return out
+
+
+def _casadi_contact_solver(qp: Any, name: str) -> Callable[[Any, Any, Any], Any]:
+    """A CasADi ``conic`` solving the same QP as ``qp`` (one per active-axis count, built once)."""
+    import casadi as ca
+
+    from peg_ctrl.controllers.mpc import _quiet_stdout
+
+    cache: dict[int, Any] = {}
+
+    def solve(axes: Any, measured: Any, wanted: Any) -> Any:
+        idx = np.flatnonzero(axes)
+        hess, rows = qp._matrices(idx.size)
+        if idx.size not in cache:
+            options = {"printLevel": "none"} if name == "qpoases" else {"osqp": {"verbose": False}}
+            with _quiet_stdout():
+                cache[idx.size] = ca.conic(
+                    "contact", name, {"h": ca.DM(hess).sparsity(), "a": ca.DM(rows).sparsity()}, options
+                )
+        lin, lo, hi, cap = qp.problem(axes, measured, wanted)
+        with _quiet_stdout():
+            sol = cache[idx.size](h=hess, g=lin, a=rows, lbx=lo, ubx=hi, lba=-cap, uba=cap)
+        return np.asarray(sol["x"]).reshape(-1)
+
+    return solve
+
+
+def bench_qp(*, instances: int = 200, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Solve time of the contact MPC's QP (:mod:`peg_ctrl.controllers.contact_mpc`) and of the
+    effort MPC's QP by each candidate solver, on the same instances, backends interleaved
+    within every repetition; wall time per solve, p50 and p99 over all repetitions."""
+    import dataclasses as dc
+
+    from peg_ctrl.controllers.contact_mpc import ContactQP, ContactSettings
+    from peg_ctrl.controllers.mpc import MPCConfig, MPCController, _quiet_stdout
+    from peg_ctrl.scene import SceneConfig, build_model
+
+    settings = ContactSettings(
+        centre_body=(0.0, -0.07, -0.01),
+        stiffness=(4447.0,) * 3 + (2.0,) * 3,
+        damping=(2000.0, 2000.0, 400.0) + (0.5,) * 3,
+        rate_cap=(0.01,) * 3 + (0.05,) * 3,
+        rate_min=(1e-4,) * 3 + (5e-4,) * 3,
+        budget=10.0,
+        smoothing=0.1,
+        horizon=10,
+        dt=0.002,
+        solver="daqp",
+        tare_time=0.0,
+        force_filter_hz=20.0,
+        moment_filter_hz=5.0,
+    )
+    problems = _contact_instances(instances, seed)
+    contact_backends: dict[str, Callable[[Any, Any, Any], Any]] = {}
+    qp_backends = (("daqp (direct)", "daqp"), ("qpsolvers: osqp", "osqp"), ("qpsolvers: proxqp", "proxqp"))
+    for label, solver in qp_backends:
+        import qpsolvers
+
+        if solver == "daqp" or solver in qpsolvers.available_solvers:
+            contact_backends[label] = ContactQP(dc.replace(settings, solver=solver)).solve
+    reference = ContactQP(settings)
+    contact_backends["casadi: qpoases"] = _casadi_contact_solver(reference, "qpoases")
+    contact_backends["casadi: osqp"] = _casadi_contact_solver(reference, "osqp")
+
+    model = build_model(SceneConfig(), "precision")
+    effort: dict[str, Any] = {}
+    with _quiet_stdout():
+        for solver in ("qpoases", "osqp"):
+            effort[f"casadi: {solver}"] = MPCController(model, MPCConfig(solver=solver, control_dt=0.001))
+    rng = np.random.default_rng(seed)
+    errors = [np.concatenate([rng.normal(0.0, [0.003, 0.02], (6, 2)).ravel()]) for _ in range(instances)]
+
+    times: dict[str, list[float]] = {f"contact {k}": [] for k in contact_backends}
+    times.update({f"effort {k}": [] for k in effort})
+    for _ in range(repeats):
+        for label, solve in contact_backends.items():
+            for axes, measured, wanted in problems:
+                t0 = time.perf_counter()
+                solve(axes, measured, wanted)
+                times[f"contact {label}"].append(time.perf_counter() - t0)
+        for label, controller in effort.items():
+            controller.reset_warm_start()
+            for z0 in errors:
+                t0 = time.perf_counter()
+                with _quiet_stdout() if label.endswith("osqp") else _nothing():
+                    controller.solve(z0, np.zeros(6), np.zeros(6))
+                times[f"effort {label}"].append(time.perf_counter() - t0)
+    rows = []
+    for label, samples in times.items():
+        p50, p99 = np.percentile(samples, [50, 99])
+        qp, backend = label.split(" ", 1)
+        rows.append({"qp": qp, "backend": backend, "p50_us": float(p50) * 1e6, "p99_us": float(p99) * 1e6})
+    return {
+        "what": "MPC QP solve time by backend",
+        "method": f"{instances} instances per QP (seed {seed}), {repeats} interleaved repetitions; wall "
+        "time per solve including the interface's own setup; contact QP: horizon 10, 1 to 5 active "
+        "axes (peg_ctrl.controllers.contact_mpc); effort QP: the condensed 15-step QP of "
+        "peg_ctrl.controllers.mpc (90 variables), warm-started",
+        "machine": platform.processor() or platform.machine(),
+        "rows": rows,
+    }
+
+
+class _nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None

@@ -197,8 +197,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             raise ConfigError(f"--control-dt must be > 0 s, got {dt}")
     if args.sweep_episodes < 1:
         raise ConfigError(f"--sweep-episodes must be >= 1, got {args.sweep_episodes}")
-    if args.physics and args.sweep:
-        raise ConfigError("--physics and --sweep are separate benchmarks; give one")
+    if sum((args.physics, args.sweep, args.qp)) > 1:
+        raise ConfigError("--physics, --sweep and --qp are separate benchmarks; give one")
     if args.control_dt:  # reject a period the physics step does not divide before any work
         from peg_ctrl.physics import PROFILES
         from peg_ctrl.timing import control_decimation
@@ -206,6 +206,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         for dt in args.control_dt:
             control_decimation(dt, PROFILES[args.profile].timestep)
     out = prepare_output_file(args.out)
+    if args.qp:
+        from peg_ctrl.bench import bench_qp
+
+        result = bench_qp(repeats=args.repeats)
+        atomic_write_text(out, to_json(result, indent=2) + "\n")
+        for row in result["rows"]:
+            print(
+                f"{row['qp']:>7} QP  {row['backend']:<18} "
+                f"p50 {row['p50_us']:8.1f} us  p99 {row['p99_us']:8.1f} us"
+            )
+        print(f"wrote {out}")
+        return 0
     if args.physics:
         from peg_ctrl.bench import bench_profiles
 
@@ -543,7 +555,7 @@ def _parser() -> argparse.ArgumentParser:
         "bench",
         help="time the loop against raw physics (JSON)",
         description="Loop overhead over raw physics per controller, by component, and sweep "
-        "throughput, written as JSON to --out. --physics or --sweep run another benchmark instead.",
+        "throughput, written as JSON to --out. --physics, --sweep or --qp run another benchmark instead.",
     )
     p.add_argument(
         "--out",
@@ -589,6 +601,11 @@ def _parser() -> argparse.ArgumentParser:
         help="episodes per profile in the 2-worker sweep throughput (default 20; 0: skip)",
     )
     p.add_argument("--sweep", action="store_true", help="instead: sweep speedup of 2 workers over 1")
+    p.add_argument(
+        "--qp",
+        action="store_true",
+        help="instead: solve time of the MPC's QPs by each candidate solver (CasADi, qpsolvers)",
+    )
     p.add_argument(
         "--physics",
         action="store_true",

@@ -34,6 +34,8 @@ POSITION_LIMIT_M = 10.0  # slide joint range (SPEC §3.2)
 COMMAND_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw", "jaw_sep_m")
 _NO_FORCE = np.zeros(3)
 _NO_FORCE.setflags(write=False)  # shared by every pose-only target
+_NO_AXES = np.zeros(6, dtype=bool)
+_NO_AXES.setflags(write=False)
 
 
 def euler_to_quat(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
@@ -75,6 +77,17 @@ class GripperTarget:
             control): the controller regulates that force component and ignores the position
             error along the axis (the velocity reference still damps). Zero everywhere (the
             default) is pure pose tracking. How each controller realises it is in its docstring.
+        torque_world: Moment the gripper should exert on its surroundings, shape (3,), [N m],
+            world axes, about the point the controller regulates moments about: its centre of
+            compliance (``impedance``, ``admittance``, ``diffik`` with ``admittance:``, the
+            contact ``mpc``, ``sampling_mpc``: the held peg's tip in the studies), or the pinch
+            point (``pd`` and the ``effort`` ``mpc``, which apply it open loop). It acts on the
+            moment-controlled axes of ``wrench_axes`` only.
+        wrench_axes: Shape (6,) bool: the world axes whose wrench is regulated instead of the
+            pose: forces along x, y, z, then moments about x, y, z. A flagged axis may ask for
+            zero (a zero moment about the peg's tip lets the peg turn until its end lies flat; a
+            zero lateral force lets a bore guide it). An axis with a non-zero ``force_world``
+            entry is force-controlled whether flagged or not.
     """
 
     p_world: NDArray[np.float64]
@@ -83,6 +96,8 @@ class GripperTarget:
     omega_body: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
     jaw_sep_m: float = JAW_SEP_MAX_M
     force_world: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
+    torque_world: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
+    wrench_axes: NDArray[np.bool_] = dataclasses.field(default_factory=lambda: np.zeros(6, dtype=bool))
 
     def __post_init__(self) -> None:
         for name, size in (
@@ -91,6 +106,7 @@ class GripperTarget:
             ("v_world", 3),
             ("omega_body", 3),
             ("force_world", 3),
+            ("torque_world", 3),
         ):
             try:
                 value = np.array(getattr(self, name), dtype=float)  # a private, read-only copy
@@ -104,6 +120,15 @@ class GripperTarget:
             if not np.all(np.isfinite(value)):
                 raise CommandError(f"GripperTarget.{name} must be finite, got {value.tolist()}")
             object.__setattr__(self, name, value)
+        axes = np.asarray(self.wrench_axes)
+        if axes.shape != (6,) or not (axes.dtype == bool or np.isin(axes, (0, 1)).all()):
+            raise CommandError(
+                "GripperTarget.wrench_axes must be 6 booleans (fx, fy, fz, mx, my, mz), "
+                f"got {self.wrench_axes!r}"
+            )
+        axes = axes.astype(bool)
+        axes.setflags(write=False)
+        object.__setattr__(self, "wrench_axes", axes)
         norm = float(np.linalg.norm(self.quat_world))
         if abs(norm - 1.0) > 1e-6:
             raise CommandError(f"GripperTarget.quat_world must be a unit quaternion, norm is {norm:.6g}")
@@ -123,6 +148,9 @@ class GripperTarget:
         omega_body: ArrayLike,
         jaw_sep_m: float,
         force_world: ArrayLike | None = None,
+        *,
+        torque_world: ArrayLike | None = None,
+        wrench_axes: ArrayLike | None = None,
     ) -> GripperTarget:
         """Build without validation, for planners whose samples are finite by construction.
 
@@ -143,18 +171,48 @@ class GripperTarget:
         force = _NO_FORCE if force_world is None else np.array(force_world, dtype=float)
         force.setflags(write=False)
         object.__setattr__(obj, "force_world", force)
+        torque = _NO_FORCE if torque_world is None else np.array(torque_world, dtype=float)
+        torque.setflags(write=False)
+        object.__setattr__(obj, "torque_world", torque)
+        axes = _NO_AXES if wrench_axes is None else np.array(wrench_axes, dtype=bool)
+        axes.setflags(write=False)
+        object.__setattr__(obj, "wrench_axes", axes)
         return obj
 
     @property
     def force_controlled(self) -> bool:
-        """Whether any axis is force-controlled."""
+        """Whether any axis (force or moment) is wrench-controlled."""
         f = self.force_world
-        return bool(f[0] or f[1] or f[2])
+        return bool(f[0] or f[1] or f[2]) or bool(self.wrench_axes.any())
+
+    @property
+    def force_axes(self) -> NDArray[np.bool_]:
+        """(3,) bool: the force-controlled axes (flagged in ``wrench_axes`` or a non-zero force)."""
+        return self.wrench_axes[:3] | (self.force_world != 0.0)
+
+    @property
+    def moment_axes(self) -> NDArray[np.bool_]:
+        """(3,) bool: the moment-controlled world axes."""
+        return self.wrench_axes[3:]
 
     def with_force(self, force_world: ArrayLike) -> GripperTarget:
         """This target with ``force_world`` replaced (no validation, like :meth:`trusted`)."""
+        return self.with_wrench(force_world, axes=self.wrench_axes, torque_world=self.torque_world)
+
+    def with_wrench(
+        self, force_world: ArrayLike, *, axes: ArrayLike, torque_world: ArrayLike | None = None
+    ) -> GripperTarget:
+        """This target with the wrench replaced: ``force_world`` [N], ``torque_world`` [N m] and
+        the regulated ``axes`` (6 booleans); no validation, like :meth:`trusted`."""
         return GripperTarget.trusted(
-            self.p_world, self.quat_world, self.v_world, self.omega_body, self.jaw_sep_m, force_world
+            self.p_world,
+            self.quat_world,
+            self.v_world,
+            self.omega_body,
+            self.jaw_sep_m,
+            force_world,
+            torque_world=torque_world,
+            wrench_axes=axes,
         )
 
     @classmethod

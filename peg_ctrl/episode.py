@@ -38,6 +38,7 @@ from peg_ctrl.jaw import load_default
 from peg_ctrl.loop import Loop, LoopOutcome, Recorder, SensorNoise
 from peg_ctrl.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.physics import PhysicsConfig, check_scene
+from peg_ctrl.physics import profile as physics_profile
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
 from peg_ctrl.recorders import (
     CallbackRecorder,
@@ -200,6 +201,19 @@ class EpisodeResult:
     plot_path: str | None = None
     video_path: str | None = None
     phases: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    # What the control costs, in wall time: per control step (the whole controller), and per
+    # solve of each of its optimisers (controllers.base.SolveTiming), with its period and its
+    # real-time factor (mean solve time over its period). The solve_time_* fields repeat the
+    # first optimiser's (the MPC's effort QP, the sampling MPC's planner, the IK's QP); None
+    # for a controller without one.
+    control_time_p50_s: float | None = None
+    control_time_p99_s: float | None = None
+    solve_time_p50_s: float | None = None
+    solve_time_p99_s: float | None = None
+    solve_period_s: float | None = None
+    solve_real_time_factor: float | None = None
+    solver_timing: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+    phantom_contacts: int = 0  # physics steps whose collider returned a phantom (loop.PhantomGuard)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -298,6 +312,7 @@ def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> L
         noise=noise,
         recorders=recorders or [],
         contact_threshold_n=cfg.log.contact_threshold,
+        phantom_depth=physics_profile(cfg.physics.profile).phantom_depth,
     )
 
 
@@ -479,4 +494,39 @@ def _result(
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
+        **timing_fields(loop),
+        phantom_contacts=loop.guard.count if loop.guard is not None else 0,
     )
+
+
+def timing_fields(loop: Loop) -> dict[str, Any]:
+    """The summary's timing fields (see :class:`EpisodeResult`) from the loop and its controller."""
+    fields: dict[str, Any] = {}
+    if loop.compute_times:
+        p50, p99 = np.percentile(loop.compute_times, [50, 99])
+        fields.update(control_time_p50_s=float(p50), control_time_p99_s=float(p99))
+    timings = getattr(loop.controller, "timings", None)
+    solvers: dict[str, dict[str, float]] = {}
+    for timing in timings() if timings is not None else []:
+        if not timing.times_s:
+            continue
+        times = np.asarray(timing.times_s)
+        p50, p99 = np.percentile(times, [50, 99])
+        solvers[timing.name] = {
+            "period_s": timing.period_s,
+            "count": int(times.size),
+            "p50_s": float(p50),
+            "p99_s": float(p99),
+            "max_s": float(times.max()),
+            "real_time_factor": float(times.mean() / timing.period_s),
+        }
+    fields["solver_timing"] = solvers
+    if solvers:
+        first = next(iter(solvers.values()))
+        fields.update(
+            solve_time_p50_s=first["p50_s"],
+            solve_time_p99_s=first["p99_s"],
+            solve_period_s=first["period_s"],
+            solve_real_time_factor=first["real_time_factor"],
+        )
+    return fields

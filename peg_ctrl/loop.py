@@ -37,7 +37,7 @@ from peg_ctrl.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock,
 from peg_ctrl.tasks.base import Evaluation, Observation, Task
 from peg_ctrl.timing import control_decimation
 
-__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTimer"]
+__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTimer", "PhantomGuard"]
 
 
 class SensorNoise:
@@ -76,6 +76,51 @@ class StepInfo(NamedTuple):
     penetrations: list[float]  # peak per state.PEG_PARTNERS [m]
     sensors: SensorBlock  # the period's physics steps, one row each
     peg_qpos: NDArray[np.float64]  # (decimation, 7) the peg's pose after each physics step
+
+
+class PhantomGuard:
+    """Steps the physics, recomputing a step's collisions without multiccd when the collider
+    returns a phantom peg-block contact (deeper than ``depth`` [m]; see
+    :attr:`peg_ctrl.physics.PhysicsProfile.phantom_depth`).
+
+    ``mj_step1`` + ``mj_step2`` is bit-identical to ``mj_step`` (not available for RK4), so a
+    step without a phantom is exactly the plain one. ``count`` is the number of recomputed steps.
+    """
+
+    def __init__(self, model: mujoco.MjModel, depth: float) -> None:
+        if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+            raise ValueError("the phantom-contact guard needs a split step; RK4 has none")
+        self.depth = depth
+        self._peg = set(np.flatnonzero(model.geom_bodyid == model.body("peg").id).tolist())
+        self._block = set(np.flatnonzero(model.geom_bodyid == model.body("block").id).tolist())
+        self.count = 0
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        mujoco.mj_step1(model, data)
+        if data.ncon and self._phantom(data):
+            flags = model.opt.disableflags
+            model.opt.disableflags = flags | mujoco.mjtDisableBit.mjDSBL_MULTICCD
+            try:
+                mujoco.mj_step1(model, data)  # positions and velocities are still this step's
+            finally:
+                model.opt.disableflags = flags
+            self.count += 1
+        mujoco.mj_step2(model, data)
+
+    def _phantom(self, data: mujoco.MjData) -> bool:
+        # Plain Python over a handful of contacts: numpy's per-call cost would dominate.
+        contact = data.contact
+        limit = -self.depth
+        deep = [i for i, d in enumerate(contact.dist.tolist()) if d < limit]
+        if not deep:
+            return False
+        geoms = contact.geom.tolist()
+        peg, block = self._peg, self._block
+        for i in deep:
+            a, b = geoms[i]
+            if (a in peg and b in block) or (b in peg and a in block):
+                return True
+        return False
 
 
 class LoopTimer:
@@ -133,6 +178,7 @@ class Loop:
     noise: SensorNoise | None = None
     recorders: Sequence[Recorder] = ()
     contact_threshold_n: float = 0.01  # contacts below this are left out of logs [N]
+    phantom_depth: float | None = None  # see PhantomGuard; None: plain mj_step
 
     def __post_init__(self) -> None:
         self.data = mujoco.MjData(self.model)
@@ -150,6 +196,11 @@ class Loop:
         self.last: Evaluation | None = None
         self.output: ControlOutput | None = None  # the controller's last output
         self.peg: PegObservation | None = None
+        self.guard = PhantomGuard(self.model, self.phantom_depth) if self.phantom_depth is not None else None
+        # A controller that plans on a model of the world hears the task's belief (peg_ctrl.belief).
+        self._observe = getattr(self.controller, "observe_belief", None)
+        self._belief: object = None
+        self.compute_times: list[float] = []  # the controller's wall time per control step [s]
 
     @property
     def control_dt(self) -> float:
@@ -169,6 +220,8 @@ class Loop:
         mujoco.mj_forward(self.model, data)
         state = self.reader.control_state(data)
         self.controller.reset(state)
+        self._belief = None
+        self.compute_times = []
         forces, _ = self.reader.pair_forces(data)
         self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
         obs = Observation(float(data.time), state, self.peg)
@@ -179,6 +232,8 @@ class Loop:
             self.grasp.reset()
         self.divergence.reset(data)
         self.sensors.raw[:] = 0.0
+        if self.guard is not None:
+            self.guard.count = 0
         self.steps = 0
         self.last = None
         return obs
@@ -227,11 +282,17 @@ class Loop:
         return self.last
 
     def _compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        if self._observe is not None:
+            belief = getattr(self.task, "belief", None)
+            if belief is not self._belief:
+                self._belief = belief
+                self._observe(belief)
         try:
             out = self.controller.compute(state, target)
         except DivergenceError as exc:
             raise EpisodeFailure("diverged", f"controller rejected the state: {exc}") from None
         self.output = out
+        self.compute_times.append(out.diagnostics.solve_time_s)
         return out
 
     def _physics(self, out: ControlOutput) -> None:
@@ -239,7 +300,7 @@ class Loop:
         model, data = self.model, self.data
         data.ctrl[:] = out.ctrl
         raw, sd, peg_log, peg_q = self.sensors.raw, data.sensordata, self.peg_qpos, self._peg_q
-        step = mujoco.mj_step
+        step = mujoco.mj_step if self.guard is None else self.guard.step
         for i in range(self.decimation):
             step(model, data)
             raw[i] = sd

@@ -26,6 +26,11 @@
       ``implicitfast`` integrator; ``impratio`` 100 keeps the grasp without noslip, whose cost
       grows with the square of the contact count.
 
+    - a peg-block contact deeper than 0.1 mm is a collider artifact (a flat face resting on a
+      flat face can make multiccd return a phantom contact as deep as the part is wide): that
+      step's collisions are recomputed without multiccd (``phantom_depth``; the episode counts
+      them in ``phantom_contacts``).
+
 ``fast``
     The ``seed`` contact model (geometry, margins, per-geom ``solref``/``solimp``, CG with 20
     noslip iterations) integrated with ``implicitfast`` at a 2.5 ms step instead of RK4 at
@@ -98,6 +103,12 @@ class PhysicsProfile:
     pair: PegContactParams | None = None
     ccd_tolerance: float | None = None  # convex collision (GJK/EPA) tolerance [m]; None: MuJoCo's
     ccd_iterations: int | None = None  # ... and iteration cap; None: MuJoCo's
+    # A peg-block contact deeper than this [m] is a collider artifact, not physics: MuJoCo 4.0's
+    # multi-contact convex collision (multiccd) now and then returns a phantom contact, as deep
+    # as the part is wide, for a flat face resting on a flat face (it answers the phantom with
+    # kN). The loop then recomputes that step's collisions without multiccd (peg_ctrl.loop).
+    # None: no check (RK4 cannot split its step to recompute).
+    phantom_depth: float | None = None
 
     def __post_init__(self) -> None:
         if self.peg_geom not in ("mesh", "cylinder"):
@@ -171,6 +182,7 @@ PRECISION = PhysicsProfile(
     pair=PegContactParams(),
     ccd_tolerance=1e-9,
     ccd_iterations=100,
+    phantom_depth=1e-4,  # 100 um: contacts here penetrate a few um at 10 N
 )
 
 FAST = dataclasses.replace(SEED, name="fast", timestep=0.0025, integrator="IMPLICITFAST")

@@ -81,6 +81,9 @@ class SceneConfig:
     block_density: float = 1000.0  # [kg/m^3] (block is static; kept for the record)
     peg_friction: tuple[float, float, float] = (0.8, 0.1, 1e-4)
     block_friction: tuple[float, float, float] = (0.9, 0.1, 1e-4)
+    # One sliding friction coefficient for the peg and the block, replacing the first entry of
+    # both (a grid axis of a study: scene.friction: [0.3, 0.9]); None: theirs as given.
+    friction: float | None = None
     contact_override: bool = False  # see module docstring
 
     def __post_init__(self) -> None:
@@ -88,8 +91,24 @@ class SceneConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"SceneConfig.{name} must be finite and > 0, got {value!r}")
+        if self.friction is not None and not (
+            isinstance(self.friction, (int, float)) and np.isfinite(self.friction) and self.friction > 0
+        ):
+            raise ValueError(f"SceneConfig.friction must be finite and > 0 (or null), got {self.friction!r}")
         if not 0.0 <= self.jaw_home_byte <= 255.0:
             raise ValueError(f"SceneConfig.jaw_home_byte must be in [0, 255], got {self.jaw_home_byte!r}")
+
+    @property
+    def peg_friction_used(self) -> tuple[float, float, float]:
+        """The peg's friction triple with ``friction`` applied."""
+        f = self.peg_friction
+        return f if self.friction is None else (float(self.friction), f[1], f[2])
+
+    @property
+    def block_friction_used(self) -> tuple[float, float, float]:
+        """The block's friction triple with ``friction`` applied."""
+        f = self.block_friction
+        return f if self.friction is None else (float(self.friction), f[1], f[2])
 
     @property
     def block_pos(self) -> tuple[float, float, float]:
@@ -175,7 +194,7 @@ def _add_block(
         geom.meshname = name
         geom.group = 3
         geom.density = cfg.block_density
-        geom.friction = list(cfg.block_friction)
+        geom.friction = list(cfg.block_friction_used)
         geom.condim = 6
         # Contacts turn active within the margin; the hole is widened by the same amount
         # (AssetParams.contact_margin) so the effective clearance is the stated one.
@@ -208,7 +227,7 @@ def _add_peg(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile, fil
         geom.type = mujoco.mjtGeom.mjGEOM_MESH
         geom.meshname = "peg"
     geom.density = cfg.peg_density
-    geom.friction = list(cfg.peg_friction)
+    geom.friction = list(cfg.peg_friction_used)
     geom.condim = 6
     geom.solref = [0.005, 1.0]
     geom.solimp = [0.9, 0.95, 0.001, 0.5, 2.0]
@@ -228,8 +247,9 @@ def _add_peg_pairs(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfil
     c = physics.pair
     if c is None:
         return
-    partners = [(part, max(cfg.peg_friction[0], cfg.block_friction[0])) for part in parts]
-    partners.append(("table", max(cfg.peg_friction[0], TABLE_FRICTION)))
+    mu = max(cfg.peg_friction_used[0], cfg.block_friction_used[0])
+    partners = [(part, mu) for part in parts]
+    partners.append(("table", max(cfg.peg_friction_used[0], TABLE_FRICTION)))
     for body in ("block", "world"):  # the table is a world geom
         exclude = spec.add_exclude()
         exclude.bodyname1, exclude.bodyname2 = "peg", body

@@ -64,6 +64,15 @@ def target(p, quat=IDENTITY, *, jaw: float = 0.085, v=(0.0, 0.0, 0.0), w=(0.0, 0
     )
 
 
+def sigint_default() -> None:
+    """``preexec_fn`` for a child that a test interrupts: Ctrl-C's default action, even when this
+    process was started with SIGINT ignored (a background shell, nohup, some CI), which a child
+    would otherwise inherit and which Python then keeps (no KeyboardInterrupt)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
     """``peg-sim ARGV`` in a fresh interpreter, run in ``cwd``."""
     return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from peg_ctrl.commands import TaskFrame, command_to_target, euler_to_quat, quat_to_euler
+from peg_ctrl.commands import GripperTarget, TaskFrame, command_to_target, euler_to_quat, quat_to_euler
 
 from .conftest import HOME, IDENTITY, target
 
@@ -87,3 +87,43 @@ def test_target_arrays_are_private_and_read_only() -> None:
     assert tgt.p_world[0] == HOME[0]
     with pytest.raises(ValueError):
         tgt.p_world[0] = 0.0
+
+
+# -- wrench-controlled axes ----------------------------------------------------------------------
+
+
+def test_a_pose_target_regulates_no_wrench() -> None:
+    tgt = target(HOME)
+    assert not tgt.force_controlled
+    assert not tgt.force_axes.any() and not tgt.moment_axes.any()
+    assert tgt.wrench_axes.shape == (6,) and tgt.torque_world.shape == (3,)
+
+
+def test_a_non_zero_force_flags_its_axis_as_before() -> None:
+    tgt = target(HOME).with_force((0.0, 0.0, -3.0))
+    assert tgt.force_controlled
+    assert tgt.force_axes.tolist() == [False, False, True]
+    assert not tgt.moment_axes.any()
+
+
+def test_flagged_axes_may_ask_for_zero() -> None:
+    """Zero moment about the tilt axes and zero lateral force: flagged, so regulated."""
+    axes = (True, True, True, True, True, False)
+    tgt = target(HOME).with_wrench((0.0, 0.0, -3.0), axes=axes)
+    assert tgt.force_controlled
+    assert tgt.force_axes.tolist() == [True, True, True]
+    assert tgt.moment_axes.tolist() == [True, True, False]
+    assert tgt.with_force((0.0, 0.0, -1.0)).wrench_axes.tolist() == list(axes)  # kept
+
+
+def test_wrench_fields_are_validated() -> None:
+    with pytest.raises(ValueError, match=r"torque_world must be finite"):
+        GripperTarget(p_world=HOME, quat_world=IDENTITY, torque_world=(0.0, math.nan, 0.0))
+    with pytest.raises(ValueError, match=r"wrench_axes must be 6 booleans \(fx, fy, fz, mx, my, mz\), got"):
+        GripperTarget(p_world=HOME, quat_world=IDENTITY, wrench_axes=(True, False))
+    with pytest.raises(ValueError, match=r"wrench_axes must be 6 booleans"):
+        GripperTarget(p_world=HOME, quat_world=IDENTITY, wrench_axes=(0, 0, 2, 0, 0, 0))
+    tgt = GripperTarget(p_world=HOME, quat_world=IDENTITY, wrench_axes=(0, 0, 1, 0, 0, 0))
+    assert tgt.wrench_axes.dtype == bool and tgt.force_axes.tolist() == [False, False, True]
+    with pytest.raises(ValueError):
+        tgt.wrench_axes[0] = True  # read-only

@@ -25,6 +25,8 @@ from peg_ctrl.episode import (
 from peg_ctrl.episode_log import STEP_FIELDS, TRACE_COLUMNS, read_log, read_trace
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig, initial_qpos
 
+from .conftest import sigint_default
+
 RANDOM = RandomizationConfig(enabled=True)
 SUMMARY_KEYS = {
     "status": str,
@@ -178,6 +180,7 @@ def _start_run(out: Path) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=sigint_default,  # the test interrupts it
     )
 
 

@@ -17,6 +17,8 @@ from peg_ctrl.experiments.report import wilson_interval
 from peg_ctrl.experiments.runner import _done, run_sweep
 from peg_ctrl.monitors import END_STATES
 
+from .conftest import sigint_default
+
 CONFIGS = Path(__file__).resolve().parent.parent / "experiments" / "configs"
 SMALL = """\
 name: small
@@ -149,9 +151,14 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path: Path) -> None:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=sigint_default,  # interrupted below
     )
+    # Interrupt once an episode is done as the runner counts it (its final summary written: the
+    # first summary, written the moment the episode ends, is not yet "done").
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not list(out.glob("episodes/*/summary.json")):
+    while time.monotonic() < deadline and not any(
+        _done(p.parent) for p in out.glob("episodes/*/summary.json")
+    ):
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGINT)
     proc.wait(timeout=60)
@@ -264,7 +271,7 @@ def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: must be one of straight, force, spiral, tilt, got 'poke'",
+            "strategies[0]: must be one of straight, force, spiral, tilt, align, got 'poke'",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",
@@ -287,6 +294,19 @@ def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
             "controllers: [pd]\nphysics: {profile: precision}\nscene: {assets: {n_parts: 12}}",
             "scene.assets.n_parts",
         ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {mpc: [spiral]}",
+            "arms.mpc: no such controller; the controllers are pd",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {pd: [tilt]}",
+            "arms.pd: 'tilt' is not one of the experiment's strategies (spiral)",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {pd: []}",
+            "arms.pd: expected a non-empty list of strategies, got []",
+        ),
+        ("controllers: [pd]\nscene: {friction: -0.2}", "friction must be finite and > 0"),
     ],
 )
 def test_bad_contact_studies_fail_in_one_line(text: str, message: str) -> None:
@@ -424,3 +444,27 @@ def test_a_report_from_episodes_csv_alone_leaves_out_the_trace_plots(tmp_path: P
         assert not (tmp_path / name).exists(), name
     assert "force traces (`episodes/<key>/forces.npz`) are not in this directory" in report
     assert "| pd/spiral | 8/8, 33.5 N | 2/8, 33.5 N |" in report  # the grid-cell table
+
+
+def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction() -> None:
+    exp = load_experiment(CONFIGS / "contact_hard.yaml")
+    jobs = expand(exp)
+    arms = list(dict.fromkeys(j.arm for j in jobs))
+    assert arms == [
+        "pd/straight",
+        "pd/spiral",
+        "pd/align",
+        "impedance/spiral",
+        "impedance/align",
+        "admittance/spiral",
+        "admittance/align",
+        "mpc/align",
+        "diffik/align",
+        "sampling_mpc/align",
+    ]
+    cells = {tuple(sorted(j.cell.items())) for j in jobs}
+    assert len(cells) == 8 and {c[0] for c in cells} == {("scene.friction", 0.3), ("scene.friction", 0.9)}
+    assert len(jobs) == len(arms) * 8 * len(exp.seeds) == 400
+    job = next(j for j in jobs if j.arm == "mpc/align" and j.cell["scene.friction"] == 0.9)
+    assert job.config.scene.friction == 0.9 and job.config.scene.assets.clearance == 0.00005
+    assert job.config.controller.formulation == "contact"  # type: ignore[attr-defined]

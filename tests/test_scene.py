@@ -17,6 +17,7 @@ from peg_ctrl.scene import (
     JAW_ACTUATOR,
     SLIDE_ACTUATORS,
     SLIDE_JOINTS,
+    SceneConfig,
     build_model,
     export_scene,
 )
@@ -109,6 +110,26 @@ def test_peg_and_block_contact_parameters(model: mujoco.MjModel) -> None:
         np.testing.assert_allclose(model.geom_solimp[g][:3], [0.9, 0.95, 0.001])
     visual = model.geom("block_visual")
     assert visual.contype[0] == 0 and visual.conaffinity[0] == 0
+
+
+def test_one_friction_sets_the_peg_and_the_block(model: mujoco.MjModel) -> None:
+    """scene.friction replaces both sliding coefficients, and the precision pairs follow."""
+    seeded = build_model(SceneConfig(friction=0.3))
+    np.testing.assert_allclose(seeded.geom("peg").friction, [0.3, 0.1, 1e-4])
+    np.testing.assert_allclose(seeded.geom("object_01").friction, [0.3, 0.1, 1e-4])
+    precise = build_model(SceneConfig(friction=0.3), "precision")
+    part = precise.pair("peg-object_01").id
+    np.testing.assert_allclose(precise.pair_friction[part][:2], [0.3, 0.3])
+    np.testing.assert_allclose(model.geom("peg").friction, [0.8, 0.1, 1e-4])  # default: theirs
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("friction", 0.0), ("friction", float("nan")), ("jaw_home_byte", 256.0), ("jaw_home_byte", -1.0)],
+)
+def test_scene_config_refuses_values_out_of_range(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=f"SceneConfig.{field} must be"):
+        SceneConfig(**{field: value})
 
 
 def test_home_pose(model: mujoco.MjModel) -> None:

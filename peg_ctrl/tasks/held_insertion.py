@@ -40,10 +40,24 @@ Strategies (``task.strategy``), each a row set of the phase table
       ``straighten`` (Ruckig, still pressing: the pinch point moves on the chord of the arc about
       the lower end, which drifts by about 0.1 mm) → ``insert``. A slide that runs out of time
       ends the episode.
-    In contact the strategies command a force along z (``GripperTarget.force_world``) and leave
-    the rest to the controller's compliance: each controller realises the force as documented in
-    its module (open loop for pd, impedance and diffik, closed loop on the sensor for admittance,
-    an effort bound in the QP for mpc).
+    - ``align``: ``approach`` a datum on the block's top face ``datum_offset`` beside the observed
+      hole → ``touch`` it (a light force-controlled press) → ``align``: press with
+      ``align_force`` with the tilt axes moment-controlled at zero about the believed lower end,
+      so the peg turns about its tip until its end lies flat on the face (the moment falls below
+      ``align_tolerance``); the gripper's orientation then tells the peg's true axis in the hand,
+      and the task re-derives the lower end, the face's height and where the hole is (its belief
+      that the peg started centred, with the corrected lower end) → ``transfer`` over the hole
+      keeping that orientation → ``search``: hops over a hexagonal lattice
+      (:mod:`peg_ctrl.tasks.hop_search`) until the peg drops onto the chamfer, then onto the
+      hole's axis with the chamfer guiding it → ``insert`` with the lateral axes free. The peg's
+      tilt is corrected *before* it meets the bore: at μ = 0.9 a 0.05 mm clearance wedges any peg
+      that enters tilted by more than about 0.3° (Whitney's wedging condition, two-point contact
+      shallower than μ times the diameter).
+    In contact the strategies command a force along z (``GripperTarget.force_world``; ``align``
+    also moments and free lateral axes, ``GripperTarget.wrench_axes``) and leave the rest to the
+    controller's compliance: each controller realises the wrench as documented in its module
+    (open loop for pd, impedance and diffik without an outer loop, closed loop on the sensor for
+    admittance and diffik with one, the force model of the contact-aware mpc).
 
 Success
     Peg depth ≥ ``success.min_depth``, lateral error ≤ ``success.max_lateral_error`` and tilt ≤
@@ -67,6 +81,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from peg_ctrl.belief import Belief
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
@@ -82,15 +97,32 @@ from peg_ctrl.monitors import (
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.sensing import WristSensor
 from peg_ctrl.state import ft_world
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
-from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout
+from peg_ctrl.tasks.hop_search import GUIDE_AXES, HexLattice, Hold, HopSearch, HopSettings
+from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.pick_and_place import SuccessConfig
 
 __all__ = ["STRATEGIES", "PHASES", "HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
 
-STRATEGIES = ("straight", "force", "spiral", "tilt")
-PHASES = ("settle", "approach", "descend", "push", "search", "slide", "straighten", "insert", DONE)
+STRATEGIES = ("straight", "force", "spiral", "tilt", "align")
+PHASES = (
+    "settle",
+    "approach",
+    "descend",
+    "push",
+    "touch",
+    "align",
+    "transfer",
+    "search",
+    "slide",
+    "straighten",
+    "insert",
+    DONE,
+)
+_ALIGN_AXES = (False, False, True, True, True, False)  # press along z, tilt axes moment-free
+_PRESS_AXES = (False, False, True, False, False, False)  # press along z, pose held otherwise
 _FORCE_FILTER_HZ = 30.0  # low-pass on the sensed contact force [Hz]
 
 
@@ -99,7 +131,7 @@ class HeldInsertionConfig(TaskSpec):
     """Disturbances [m, rad], strategy and its parameters [m, m/s, N, rad, s]."""
 
     name: ClassVar[str] = "held_insertion"
-    strategy: str = "force"  # straight, force, spiral or tilt
+    strategy: str = "force"  # straight, force, spiral, tilt or align
     lateral_error: float = 0.0015  # peg axis to hole axis at the mouth at first contact [m]
     tilt_error: float = 0.0  # peg tilt in the grasp [rad]
     position_noise: float = 0.0  # std of the observed hole position, x and y [m]
@@ -121,6 +153,20 @@ class HeldInsertionConfig(TaskSpec):
     seat_margin: float = 0.002  # the straight push aims this far below the seated depth [m]
     insert_time: float = 8.0  # budget of the force-regulated insert [s] (the straight push: its
     # motion and 1 s)
+    # The align strategy (see the module docstring and peg_ctrl.tasks.hop_search).
+    datum_offset: float = 0.03  # the datum touch, this far from the observed hole towards -x, -y [m]
+    touch_gap: float = 0.0012  # the approach stops the lower end this far above the face [m]
+    touch_force: float = 0.6  # light press: touching the datum, every search hop [N]
+    align_force: float = 3.0  # press while the peg turns flat [N]
+    align_tolerance: float = 0.002  # flat once the moment about the tip stays below this [N m]
+    align_time: float = 4.0  # budget of the alignment [s]
+    search_pitch: float = 0.0016  # hexagonal lattice pitch [m] (<= sqrt(3) x the capture range)
+    hop_lift: float = 0.0002  # lift between hops [m]
+    hop_hover: float = 0.00008  # the press starts this far above the face [m]
+    hop_speed: float = 0.02  # lateral hop speed [m/s]
+    hop_lower_speed: float = 0.003  # descent to the hover height [m/s]
+    drop_min: float = 0.00003  # a press this far below the face is on the chamfer [m]
+    search_time: float = 10.0  # budget of the hop search [s]
 
     def __post_init__(self) -> None:
         if self.strategy not in STRATEGIES:
@@ -140,6 +186,11 @@ class HeldInsertionConfig(TaskSpec):
             raise ConfigError(f"task.tilt_error must be below 0.2 rad, got {self.tilt_error!r}")
         if not 0.0 < self.tilt_angle < 0.5:
             raise ConfigError(f"task.tilt_angle must be in (0, 0.5) rad, got {self.tilt_angle!r}")
+        if self.drop_min >= self.hop_hover + 0.001:
+            raise ConfigError(
+                f"task.drop_min must be below hop_hover + 1 mm ({self.hop_hover + 0.001:.4g} m), "
+                f"got {self.drop_min!r}"
+            )
 
     def build(self, context: TaskContext) -> HeldInsertionTask:
         return HeldInsertionTask(
@@ -163,6 +214,38 @@ class HeldInsertionConfig(TaskSpec):
             raise ConfigError(
                 f"task.grip_above_centre must leave 10 mm of peg above the pads (< "
                 f"{0.5 * a.peg_length - 0.01:g} m), got {self.grip_above_centre!r}"
+            )
+        if self.strategy == "align":
+            self._check_align(scene)
+
+    def _check_align(self, scene: SceneConfig) -> None:
+        """The datum must lie on the top face, clear of the hole and its chamfer whatever the
+        lateral error, the tilt (which moves the believed lower end) and the noise; the lattice
+        must leave no gap in the chamfer's capture range."""
+        a = scene.assets
+        half = 0.5 * min(a.block_size[0], a.block_size[1])
+        reach = self.datum_offset / math.sqrt(2.0) + a.peg_radius  # along x and y (a diagonal)
+        if reach >= half - 0.002:
+            raise ConfigError(
+                f"task.datum_offset: the datum touch reaches {reach * 1e3:.1f} mm from the hole along x "
+                f"and y, beyond the block's top face ({half * 1e3:.1f} mm); must be < "
+                f"{(half - 0.002 - a.peg_radius) * math.sqrt(2.0):.4g} m"
+            )
+        mouth = a.peg_radius + a.clearance + a.chamfer
+        lean = (self.grip_above_centre + 0.5 * a.peg_length) * math.sin(self.tilt_error)
+        error = self.lateral_error + lean + 3.0 * self.position_noise
+        if self.datum_offset - a.peg_radius - error <= mouth + 0.001:
+            raise ConfigError(
+                f"task.datum_offset: {self.datum_offset!r} m puts the datum touch within 1 mm of the "
+                f"hole's mouth (radius {mouth * 1e3:.2f} mm) for a lateral error of "
+                f"{error * 1e3:.2f} mm (lateral error, tilt, noise); must be > "
+                f"{mouth + 0.001 + a.peg_radius + error:.4g} m"
+            )
+        capture = a.clearance + a.chamfer
+        if self.search_pitch > math.sqrt(3.0) * (capture - self.drop_min):
+            raise ConfigError(
+                f"task.search_pitch: {self.search_pitch!r} m leaves gaps in the chamfer's capture range "
+                f"({capture * 1e3:.2f} mm); must be <= {math.sqrt(3.0) * (capture - self.drop_min):.4g} m"
             )
 
 
@@ -248,6 +331,22 @@ class HeldInsertionTask:
         self._goal = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
         self.seated = SeatedHold(success.consecutive_steps)
         self._pressing = _Pressing(self._goal, config.insert_force)
+        # The align strategy's belief and sensing (see _recalibrate).
+        self._grip_length = config.grip_above_centre + 0.5 * float(a.peg_length)  # pads to lower end [m]
+        self._grasp_body = np.zeros(3)  # where the pads hold the peg's axis, gripper frame [m]
+        self._start = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)  # the pose at the start
+        self._noise = np.zeros(2)  # the observation noise on the hole's position [m]
+        self.z_face = self.block_top  # the face's height as the believed lower end senses it [m]
+        self.aligned_tilt: float | None = None  # the peg's tilt in the hand the alignment found [rad]
+        self._wrist: WristSensor | None = None
+        self._hold = Hold(
+            GripperTarget.trusted(np.zeros(3), (1.0, 0.0, 0.0, 0.0), np.zeros(3), np.zeros(3), 0.0)
+        )
+        self._search: HopSearch | None = None
+        self._flat_since: float | None = None
+        self._settle_from: float | None = None
+        self._belief: Belief | None = None
+        self._belief_key: tuple[float, ...] = ()
 
     # -- the phase table ------------------------------------------------------------------------
     def phase_table(self) -> dict[str, PhaseSpec]:
@@ -258,6 +357,8 @@ class HeldInsertionTask:
             self._enter_approach, self._motion_done, self._after_approach, Timeout(1.0, True)
         )
         insert = PhaseSpec(self._enter_insert, _never, DONE, last, tick=self._govern)
+        if c.strategy == "align":
+            return self._align_table(settle, last)
         if c.strategy == "straight":
             return {
                 "settle": settle,
@@ -296,6 +397,30 @@ class HeldInsertionTask:
             )
         return table
 
+    def _align_table(self, settle: PhaseSpec, last: Timeout) -> dict[str, PhaseSpec]:
+        c = self.cfg
+        return {
+            "settle": settle,
+            "approach": PhaseSpec(self._enter_datum, self._motion_done, "touch", Timeout(1.0, True)),
+            "touch": PhaseSpec(
+                self._enter_touch, self._touched_datum, self._after_touch, Timeout(2.0), tick=self._feel
+            ),
+            "align": PhaseSpec(
+                self._enter_align, self._aligned, "transfer", Timeout(c.align_time), tick=self._feel
+            ),
+            "transfer": PhaseSpec(
+                self._enter_transfer, self._motion_done, "search", Timeout(1.0, True), tick=self._feel
+            ),
+            "search": PhaseSpec(
+                self._enter_hop_search,
+                self._found,
+                self._after_search,
+                Timeout(c.search_time),
+                tick=self._hop,
+            ),
+            "insert": PhaseSpec(self._enter_guided_insert, _never, DONE, last, tick=self._govern),
+        }
+
     # -- the Task interface -------------------------------------------------------------------
     @property
     def phase(self) -> str:
@@ -308,6 +433,32 @@ class HeldInsertionTask:
     @property
     def records(self) -> list[PhaseRecord]:
         return self.machine.records
+
+    @property
+    def belief(self) -> Belief:
+        """The hole and the grasp as the task believes them (a new object when they change)."""
+        key = (
+            *self.observed_hole.tolist(),
+            self.z_face,
+            *self._b_body.tolist(),
+            *self._up_body.tolist(),
+        )
+        if self._belief is None or key != self._belief_key:
+            self._belief_key = key
+            a = self.scene.assets
+            self._belief = Belief(
+                hole_xy=(float(self.observed_hole[0]), float(self.observed_hole[1])),
+                hole_sigma=self.cfg.position_noise,
+                face_z=self.z_face,
+                hole_radius=self.hole_radius,
+                chamfer=self.chamfer,
+                block_size=tuple(float(v) for v in a.block_size),  # type: ignore[arg-type]
+                peg_radius=self.radius,
+                peg_length=float(a.peg_length),
+                tip_body=tuple(float(v) for v in self._b_body),  # type: ignore[arg-type]
+                axis_body=tuple(float(v) for v in self._up_body),  # type: ignore[arg-type]
+            )
+        return self._belief
 
     @property
     def time_to_insert(self) -> float | None:
@@ -358,12 +509,23 @@ class HeldInsertionTask:
         believed_bottom = pinch + b_world
         self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
         self._sense = _ContactSense(self.control_dt)
+        self._noise = np.asarray(d.noise, dtype=float)
+        self._grasp_body = self._b_body + self._grip_length * self._up_body
+        self.z_face = self.block_top
+        self.aligned_tilt = None
+        self._search = None
+        self._wrist = (
+            WristSensor(model, centre_body=self._b_body, dt=self.control_dt)
+            if c.strategy == "align"
+            else None
+        )
         self.machine = PhaseMachine(self.phase_table())
         self.seated.reset()
 
     def start(self, obs: Observation) -> None:
         s = obs.gripper
         self._goal = Waypoint.of(s.p_world, s.quat_world, 0.0)
+        self._start = self._goal
         self.machine.start("settle", obs)
 
     def target(self, obs: Observation) -> GripperTarget:
@@ -515,12 +677,156 @@ class HeldInsertionTask:
         self._goal = goal
         return _Pressed(trajectory, self.cfg.search_force)
 
+    # -- the align strategy ---------------------------------------------------------------------
+    def _tip_waypoint(self, tip: NDArray[np.float64], q: NDArray[np.float64]) -> Waypoint:
+        return Waypoint.of(self._pinch_for(tip, q), q, 0.0)
+
+    def _held(self, target: GripperTarget) -> Hold:
+        self._hold.target = target
+        return self._hold
+
+    def _press_here(self, obs: Observation, force: float, axes: tuple[bool, ...]) -> GripperTarget:
+        """Hold the present pose, pressing down with ``force`` [N] on the flagged ``axes``."""
+        s = obs.gripper
+        self._goal = Waypoint.of(s.p_world, s.quat_world, 0.0)
+        return GripperTarget.trusted(
+            s.p_world, s.quat_world, np.zeros(3), np.zeros(3), 0.0, _down(force), wrench_axes=axes
+        )
+
+    def _enter_datum(self, obs: Observation) -> Motion:
+        """Over the datum, the lower end ``touch_gap`` above the face."""
+        c = self.cfg
+        q = np.asarray(self._goal.quat_world)
+        off = c.datum_offset / math.sqrt(2.0)  # along the diagonal, where the face is widest
+        tip = np.array(
+            [self.observed_hole[0] - off, self.observed_hole[1] - off, self.block_top + c.touch_gap]
+        )
+        return self._move(self._tip_waypoint(tip, q))
+
+    def _enter_touch(self, obs: Observation) -> Motion:
+        self._flat_since = None
+        return self._held(self._press_here(obs, self.cfg.touch_force, _PRESS_AXES))
+
+    def _touched_datum(self, obs: Observation) -> str | None:
+        """Contact: the sensed push lasts 20 ms (the sensor also reads the hand's accelerations)."""
+        assert self._wrist is not None
+        pressed = self.machine.elapsed(obs.t) > 0.05 and self._wrist.force[2] > 0.8 * self.cfg.touch_force
+        self._flat_since = (self._flat_since or obs.t) if pressed else None
+        return "contact" if self._flat_since is not None and obs.t - self._flat_since >= 0.02 else None
+
+    def _after_touch(self, obs: Observation) -> str:
+        return "align" if self._flat_since is not None else DONE
+
+    def _enter_align(self, obs: Observation) -> Motion:
+        self._flat_since = self._settle_from = None
+        return self._held(self._press_here(obs, self.cfg.align_force, _ALIGN_AXES))
+
+    def _aligned(self, obs: Observation) -> str | None:
+        """Flat once the moment about the lower end stays below ``align_tolerance`` for 0.1 s;
+        then a light press with the orientation held, 0.15 s, before the belief is updated."""
+        assert self._wrist is not None
+        t = obs.t
+        if self._settle_from is None:
+            m = self._wrist.moment
+            pressed = self._wrist.force[2] > 0.5 * self.cfg.align_force  # flat on the face, not in the air
+            flat = (
+                pressed
+                and self.machine.elapsed(t) > 0.2
+                and math.hypot(m[0], m[1]) < self.cfg.align_tolerance
+            )
+            self._flat_since = (self._flat_since or t) if flat else None
+            if self._flat_since is not None and t - self._flat_since >= 0.1:
+                self._settle_from = t
+                self._hold.target = self._press_here(obs, self.cfg.touch_force, _PRESS_AXES)
+            return None
+        return "flat" if t - self._settle_from >= 0.15 else None
+
+    def _recalibrate(self, obs: Observation) -> None:
+        """The peg's end lies flat on the face: its axis is vertical now. The pads still hold it
+        where they did, so the lower end is ``_grip_length`` below them along that axis; the
+        face's height follows, and so does the hole (the task believes the peg started centred)."""
+        assert self._wrist is not None
+        q = obs.gripper.quat_world
+        up_body = rotate_inv(q, np.array([0.0, 0.0, 1.0]))
+        self.aligned_tilt = math.acos(max(-1.0, min(1.0, float(np.dot(up_body, self._up_body)))))
+        self._up_body = up_body
+        self._b_body = self._grasp_body - self._grip_length * up_body
+        self._wrist.centre_body = self._b_body
+        self.z_face = float(self.believed_bottom(obs)[2])
+        start = self._start
+        start_tip = np.asarray(start.p_world) + rotate(np.asarray(start.quat_world), self._b_body)
+        self.observed_hole = start_tip[:2] + self._noise
+
+    def _enter_transfer(self, obs: Observation) -> Motion:
+        """Up off the datum, over the hole, down to the hover height, keeping the orientation."""
+        self._recalibrate(obs)
+        c = self.cfg
+        s = obs.gripper
+        q = s.quat_world
+        here = Waypoint.of(s.p_world, q, 0.0)
+        up = self.believed_bottom(obs) + np.array([0.0, 0.0, 0.002])
+        over = np.array([*self.observed_hole, up[2]])
+        hover = np.array([*self.observed_hole, self.z_face + c.hop_hover])
+        lower = dataclasses.replace(self.limits, v_lin=c.hop_lower_speed, a_lin=0.5, j_lin=20.0)
+        lift = self.planner.plan(here, self._tip_waypoint(up, q), self.limits)
+        across = self.planner.plan(self._tip_waypoint(up, q), self._tip_waypoint(over, q), self.limits)
+        down = self.planner.plan(self._tip_waypoint(over, q), self._tip_waypoint(hover, q), lower)
+        self._goal = self._tip_waypoint(hover, q)
+        return TrajectorySequence([lift, across, down])
+
+    def _enter_hop_search(self, obs: Observation) -> Motion:
+        c, a = self.cfg, self.scene.assets
+        settings = HopSettings(
+            press_force=c.touch_force,
+            hover=c.hop_hover,
+            lift=c.hop_lift,
+            hop_speed=c.hop_speed,
+            lower_speed=c.hop_lower_speed,
+            drop_min=c.drop_min,
+            capture=a.clearance + a.chamfer,
+            settle_time=0.05,
+            guide_time=1.0,
+        )
+        self._search = HopSearch(
+            centre=self.observed_hole,
+            z_face=self.z_face,
+            quat=np.asarray(self._goal.quat_world),
+            lattice=HexLattice(c.search_pitch, c.search_radius),
+            settings=settings,
+            planner=self.planner,
+            limits=self.limits,
+            tip_to_pinch=self._pinch_for,
+            t0=obs.t,
+        )
+        return self._search
+
+    def _hop(self, obs: Observation) -> None:
+        self._feel(obs)
+        assert self._search is not None and self._wrist is not None
+        self._search.step(obs.t, self.believed_bottom(obs), self._wrist.force, self._wrist.moment)
+
+    def _found(self, obs: Observation) -> str | None:
+        if self._in_bore(obs):
+            return "entered"
+        assert self._search is not None
+        return "exhausted" if self._search.exhausted else None
+
+    def _enter_guided_insert(self, obs: Observation) -> Motion:
+        """Push down with the lateral axes free: the bore guides the peg."""
+        self._hold_here(obs)
+        self._pressing = _Pressing(self._goal, self.cfg.insert_force, GUIDE_AXES)
+        return self._pressing
+
     # -- guards and hooks -----------------------------------------------------------------------
     def _tare(self, obs: Observation) -> None:
         self._sense.accumulate_tare(obs)
+        if self._wrist is not None:
+            self._wrist.accumulate_tare(obs.gripper)
 
     def _feel(self, obs: Observation) -> None:
         self._sense.update(obs)
+        if self._wrist is not None:
+            self._wrist.update(obs.gripper)
 
     def _settled(self, obs: Observation) -> str | None:
         return "ok" if self.machine.elapsed(obs.t) >= self.cfg.settle_time else None
@@ -541,19 +847,27 @@ def _down(force: float) -> NDArray[np.float64]:
 
 
 class _Pressing:
-    """Hold ``at`` laterally and in orientation, pushing down with ``force`` [N] (adjustable)."""
+    """Hold ``at`` laterally and in orientation, pushing down with ``force`` [N] (adjustable);
+    ``axes`` (6 booleans), when given, also frees other axes (the lateral forces, at zero)."""
 
     duration = 0.0
 
-    def __init__(self, at: Waypoint, force: float) -> None:
+    def __init__(self, at: Waypoint, force: float, axes: tuple[bool, ...] | None = None) -> None:
         self._at = at
+        self._axes = axes
         self.set_force(force)
 
     def set_force(self, force: float) -> None:
         # A force of exactly 0 would hand z back to position control: keep a token push.
         at = self._at
         self._target = GripperTarget.trusted(
-            at.p_world, at.quat_world, np.zeros(3), np.zeros(3), 0.0, _down(max(force, 1e-3))
+            at.p_world,
+            at.quat_world,
+            np.zeros(3),
+            np.zeros(3),
+            0.0,
+            _down(max(force, 1e-3)),
+            wrench_axes=self._axes,
         )
 
     def sample(self, t: float) -> GripperTarget:

@@ -8,7 +8,7 @@ import pytest
 from peg_ctrl.scene import HOME_KEY
 from peg_ctrl.state import ControlState, StateReader
 
-NAMES = ("admittance", "diffik", "impedance", "mpc", "pd")
+NAMES = ("admittance", "diffik", "impedance", "mpc", "pd", "sampling_mpc")
 
 
 @pytest.fixture(scope="session")

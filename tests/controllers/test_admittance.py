@@ -38,7 +38,7 @@ def test_inner_pd_is_configured_and_runs_at_our_period(model: mujoco.MjModel) ->
 
 def _at_rest_wrench(c: AdmittanceController, state: ControlState, push_world: np.ndarray) -> np.ndarray:
     """The sensor reading for the gripper at rest under its weight and an external push [N]."""
-    f_world = -c._mass_below * c._gravity - push_world  # what external_force() inverts
+    f_world = -c.loop.wrist.mass * c.loop.wrist.gravity - push_world  # what external_force() inverts
     f_site = np.empty(3)
     q = state.quat_world
     mujoco.mju_rotVecQuat(f_site, f_world, np.array([q[0], -q[1], -q[2], -q[3]]))
@@ -137,3 +137,30 @@ def test_rotational_admittance_turns_like_a_spring(model: mujoco.MjModel) -> Non
     expected = (0.2 - cfg.torque_deadband) / cfg.rot_stiffness
     assert controller.rotation[1] == pytest.approx(expected, rel=0.15)
     assert abs(controller.rotation[0]) < 0.1 * expected and abs(controller.rotation[2]) < 0.1 * expected
+
+
+# -- moment-controlled axes ----------------------------------------------------------------------
+
+
+def test_a_moment_axis_turns_the_command_until_the_moment_is_gone(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """A sensed moment about x on a moment-controlled axis turns the command about the centre at
+    M / D_m (capped), and only about that axis; a pose target leaves the turn at zero."""
+    cfg = AdmittanceConfig(
+        compliance_center=(0.0, 0.0, -0.07), moment_damping=1.0, max_turn_rate=0.02, tare_time=0.05
+    )
+    c = AdmittanceController(model, cfg)
+    rest = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.zeros(3)))
+    c.reset(rest)
+    free = target(rest.p_world).with_wrench((0.0, 0.0, 0.0), axes=(False,) * 3 + (True, True, False))
+    for i in range(50):  # the tare: 50 ms at rest, free of contact
+        c.compute(rest._replace(t=0.001 * i), free)
+    torque = np.array([0.0, 0.0, 0.0, 0.03, 0.0, 0.0])  # a contact's moment about x at the sensor
+    state = rest._replace(t=0.05, ft_wrench=rest.ft_wrench - torque)
+    for _ in range(2000):  # 2 s: the 5 Hz moment filter settles, the turn runs at its rate
+        c.compute(state, free)
+    assert abs(c.turn[0]) == pytest.approx(0.02 * 2.0, rel=0.1)  # capped at 0.02 rad/s
+    assert abs(c.turn[1]) < 1e-9 and abs(c.turn[2]) < 1e-9
+    c.compute(state, target(state.p_world))
+    assert np.all(c.turn == 0.0)  # no longer moment-controlled: the task re-anchors

@@ -34,7 +34,7 @@ from peg_ctrl.experiments.runner import run_sweep
 from peg_ctrl.io import LOCK_NAME, lock_output_dir
 from peg_ctrl.workers import WATCH_PERIOD_S, worker_pool
 
-from ..conftest import assert_one_line_error, peg_sim
+from ..conftest import assert_one_line_error, peg_sim, sigint_default
 
 needs_proc = pytest.mark.skipif(
     not Path("/proc/self/environ").is_file(), reason="finds processes through /proc (Linux)"
@@ -118,6 +118,7 @@ def _start_sweep(config: Path, out: Path, marker: str, log: Path) -> subprocess.
             stderr=err,
             env={**os.environ, MARKER: marker},
             start_new_session=True,
+            preexec_fn=sigint_default,  # the tests interrupt it
         )
 
 

@@ -52,7 +52,7 @@ def test_the_task_family_is_chosen_by_name() -> None:
     [
         (
             ["task.strategy=wiggle"],
-            "task.strategy must be one of straight, force, spiral, tilt, got 'wiggle'",
+            "task.strategy must be one of straight, force, spiral, tilt, align, got 'wiggle'",
         ),
         (["task.lateral_error=-0.001"], "task.lateral_error must be >= 0, got -0.001"),
         (["task.tilt_error=0.3"], "task.tilt_error must be below 0.2 rad, got 0.3"),
@@ -186,3 +186,60 @@ def test_the_mpc_force_limit_bounds_a_position_push(tmp_path: Path) -> None:
         medians.append(float(np.median(force[t > t[-1] - 0.5])))
     assert medians[0] == pytest.approx(8.0, abs=1.0)
     assert medians[1] > 3 * medians[0]
+
+
+# -- the align strategy ----------------------------------------------------------------------------
+HARD = {"scene.friction=0.9", "scene.assets.clearance=0.00005"}
+CONTACT_MPC = {
+    "name": "mpc",
+    "formulation": "contact",
+    "compliance_center": TIP,
+    "force_limit": 10.0,
+    "tare_time": 0.25,
+    "control_dt": 0.001,
+}
+
+
+@pytest.mark.parametrize(
+    ("sets", "message"),
+    [
+        (["task.datum_offset=0.05"], "task.datum_offset: the datum touch reaches 45.4 mm from the hole"),
+        (["task.datum_offset=0.02", "task.lateral_error=0.003"], "within 1 mm of the hole's mouth"),
+        (
+            ["task.search_pitch=0.002"],
+            "task.search_pitch: 0.002 m leaves gaps in the chamfer's capture range",
+        ),
+    ],
+)
+def test_align_settings_are_checked_against_the_scene(sets: list[str], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        config("task.strategy=align", *sets)
+
+
+def test_align_seats_a_tilted_peg_at_high_friction_within_the_budget() -> None:
+    """mu = 0.9, 0.05 mm clearance, 3 mm off and 2 deg tilted in the hand, unknown to the task:
+    the contact-aware MPC flattens the peg on the datum (finding the hidden tilt), finds the hole
+    by hops and seats it, the peg-block force never above its 10 N budget."""
+    cfg = config(
+        "task.strategy=align",
+        "task.lateral_error=0.003",
+        "task.tilt_error=0.0349066",
+        *HARD,
+        controller=CONTACT_MPC,
+    )
+    loop = build_loop(cfg)
+    loop.reset(np.random.default_rng(cfg.seed))
+    belief = loop.task.belief
+    peak, outcome = 0.0, None
+    while loop.steps < 40000:
+        evaluation = loop.step()
+        peak = max(peak, loop.peg.force_block)
+        if evaluation.done:
+            outcome = evaluation
+            break
+    assert outcome is not None and outcome.success, outcome
+    assert loop.task.aligned_tilt == pytest.approx(0.0349066, abs=math.radians(0.1))
+    assert loop.task.belief is not belief  # the calibration revised the belief
+    assert peak <= 10.0
+    phases = [r.phase for r in loop.task.records]
+    assert phases[:8] == ["start", "settle", "approach", "touch", "align", "transfer", "search", "insert"]
