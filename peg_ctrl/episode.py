@@ -52,6 +52,7 @@ from peg_ctrl.tasks.base import TaskContext, TaskSpec
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
 
 __all__ = [
+    "WALL_CLOCK_FIELDS",
     "RandomizationConfig",
     "LogConfig",
     "EpisodeConfig",
@@ -159,6 +160,18 @@ class EpisodeConfig:
 def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
     """Build an :class:`EpisodeConfig` from plain data; ``controller: {name: pd, kp_pos: ...}``."""
     return load(EpisodeConfig, data)
+
+
+# Summary fields measured in wall time: they differ between two runs of the same episode.
+WALL_CLOCK_FIELDS = (
+    "wall_time_s",
+    "control_time_p50_s",
+    "control_time_p99_s",
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_real_time_factor",
+    "solver_timing",
+)
 
 
 @dataclasses.dataclass
@@ -494,14 +507,19 @@ def _result(
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
-        **timing_fields(loop),
-        phantom_contacts=loop.guard.count if loop.guard is not None else 0,
+        **loop_fields(loop),
     )
+
+
+def loop_fields(loop: Loop) -> dict[str, Any]:
+    """The summary's fields the loop itself measured: timing (:func:`timing_fields`) and the
+    phantom contacts its guard removed."""
+    return {**timing_fields(loop), "phantom_contacts": loop.guard.count if loop.guard is not None else 0}
 
 
 def timing_fields(loop: Loop) -> dict[str, Any]:
     """The summary's timing fields (see :class:`EpisodeResult`) from the loop and its controller."""
-    fields: dict[str, Any] = {}
+    fields: dict[str, Any] = dict.fromkeys(WALL_CLOCK_FIELDS[1:-1] + ("solve_period_s",))
     if loop.compute_times:
         p50, p99 = np.percentile(loop.compute_times, [50, 99])
         fields.update(control_time_p50_s=float(p50), control_time_p99_s=float(p99))

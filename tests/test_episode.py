@@ -17,6 +17,7 @@ from peg_ctrl.config import ConfigError
 from peg_ctrl.controllers import PDConfig
 from peg_ctrl.episode import (
     FAILURE_REASONS,
+    WALL_CLOCK_FIELDS,
     EpisodeConfig,
     RandomizationConfig,
     episode_config_from_mapping,
@@ -121,7 +122,7 @@ def test_same_seed_same_episode(tmp_path: Path) -> None:
     a = run_episode(cfg, tmp_path / "a", plot=False)
     b = run_episode(cfg, tmp_path / "b", plot=False)
     np.testing.assert_array_equal(read_trace(tmp_path / "a"), read_trace(tmp_path / "b"))
-    skip = {"wall_time_s", "log_path", "trace_path", "plot_path", "video_path"}
+    skip = {*WALL_CLOCK_FIELDS, "log_path", "trace_path", "plot_path", "video_path"}
     assert {k: v for k, v in a.to_dict().items() if k not in skip} == {
         k: v for k, v in b.to_dict().items() if k not in skip
     }

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from peg_ctrl.episode import WALL_CLOCK_FIELDS
 from peg_ctrl.experiments.config import expand, experiment_from_mapping, load_experiment
 from peg_ctrl.experiments.report import wilson_interval
 from peg_ctrl.experiments.runner import _done, run_sweep
@@ -31,7 +32,7 @@ max_steps: 4000
 
 def _rows(path: Path) -> list[dict]:
     with open(path, newline="") as fh:
-        return [{k: v for k, v in row.items() if k != "wall_time_s"} for row in csv.DictReader(fh)]
+        return [{k: v for k, v in row.items() if k not in WALL_CLOCK_FIELDS} for row in csv.DictReader(fh)]
 
 
 def test_shipped_experiments_load() -> None:

@@ -213,7 +213,7 @@ def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp
         (["run", "--set", "seed=[1, 2", "--out", "X"], "--set seed: value '[1, 2' is not valid YAML"),
         (["validity", "--seed", "-1", "--out", "X"], "--seed must be >= 0, got -1"),
         (["validity", "--profile", "exact", "--out", "X"], "--profile: unknown physics profile 'exact'"),
-        (["bench", "--physics", "--sweep", "--out", "X"], "--physics and --sweep"),
+        (["bench", "--physics", "--sweep", "--out", "X"], "--physics, --sweep and --qp are separate"),
     ],
 )
 def test_bad_run_and_sweep_overrides_are_one_line_with_exit_2(

@@ -24,7 +24,7 @@ import numpy as np
 from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
 from peg_ctrl.config import to_dict
 from peg_ctrl.controllers import ControllerConfig
-from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model, contact_fields
+from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model, contact_fields, loop_fields
 from peg_ctrl.episode_log import EpisodeLogger
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text, to_json
@@ -242,6 +242,7 @@ class TeleopSession:
             "end": reason,
             "peg_radial_m": check.radial_m,
             "peg_bottom_z_m": check.bottom_z_m,
+            **loop_fields(self.loop),
         }
         summary = self.out_dir / "summary.json"
         try:

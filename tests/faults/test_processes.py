@@ -27,6 +27,7 @@ import pytest
 
 from peg_ctrl.batch import run_batch
 from peg_ctrl.cli import main
+from peg_ctrl.episode import WALL_CLOCK_FIELDS
 from peg_ctrl.errors import ConfigError, OutputError, OutputInUse
 from peg_ctrl.experiments.config import experiment_from_mapping
 from peg_ctrl.experiments.report import episodes_csv_problem
@@ -54,7 +55,7 @@ N_EPISODES = 6
 # Four episodes of a few hundredths of a second, for the plot tests.
 SMALL = {"name": "small", "controllers": ["pd", "impedance"], "seeds": [0, 1], "max_steps": 300}
 # Columns that differ from run to run.
-WALL_CLOCK = ("wall_time_s",)
+WALL_CLOCK = WALL_CLOCK_FIELDS
 
 
 # ---------------------------------------------------------------------------------------------
