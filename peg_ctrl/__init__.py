@@ -14,6 +14,27 @@ import os as _os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
+
+def _choose_gl_backend() -> None:
+    """Headless by default: on Linux without a display, and with ``MUJOCO_GL`` unset, offscreen
+    rendering (``render_mode="rgb_array"``, ``run --video``) uses EGL, else OSMesa, whichever
+    library is installed. mujoco reads ``MUJOCO_GL`` once, when it is first imported: set it
+    before (``import peg_ctrl`` first, or set ``MUJOCO_GL`` yourself)."""
+    import sys
+    from ctypes.util import find_library
+
+    if _os.environ.get("MUJOCO_GL") or not sys.platform.startswith("linux"):
+        return
+    if _os.environ.get("DISPLAY") or _os.environ.get("WAYLAND_DISPLAY"):
+        return
+    for backend, library in (("egl", "EGL"), ("osmesa", "OSMesa")):
+        if find_library(library):
+            _os.environ["MUJOCO_GL"] = backend
+            return
+
+
+_choose_gl_backend()
+
 from gymnasium.envs.registration import register as _register  # noqa: E402
 from gymnasium.envs.registration import registry as _registry  # noqa: E402
 

@@ -269,6 +269,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _require_display(what: str, instead: str) -> None:
+    """A window needs a display: without one, one line naming the alternative (exit 2)."""
+    display = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    if sys.platform.startswith("linux") and not display:
+        raise ConfigError(f"{what} needs a display (DISPLAY is not set); {instead}")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from peg_ctrl.episode import episode_config_from_mapping, run_episode
 
@@ -296,6 +303,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             "randomization.enabled in the config) and the config's domain has no ranges or noise; "
             "add --randomize"
         )
+    if args.viewer:  # refused before anything is written
+        _require_display("--viewer", "run without it, or with --video")
     with lock_output_dir(prepare_output_dir(args.out)) as out:
         if args.viewer:
             result = _run_with_viewer(cfg, out)
@@ -346,8 +355,8 @@ def _cmd_teleop(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.seed is not None and not args.randomize:
         raise ConfigError("--seed only changes the peg's start pose with --randomize; add --randomize")
-    if not args.scripted and not os.environ.get("DISPLAY"):
-        raise ConfigError("teleop needs a display (DISPLAY is not set); use --scripted to run headless")
+    if not args.scripted:
+        _require_display("teleop", "use --scripted to run headless")
     with lock_output_dir(prepare_output_dir(args.out)) as out:
         summary = _teleop(args, out)
     inserted = "inserted" if summary["status"] == "success" else "not inserted"
@@ -783,16 +792,6 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _choose_gl_backend() -> None:
-    """Offscreen rendering (``run --video``) on Linux without a window system: EGL.
-
-    Set before parsing: mujoco reads ``MUJOCO_GL`` once, on import, and the parser's registry
-    checks (:class:`_Known`) may import it. Only on Linux, the one platform where EGL is valid.
-    """
-    if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-        os.environ.setdefault("MUJOCO_GL", "egl")
-
-
 def _one_line_warning(default: Callable[..., None]) -> Callable[..., None]:
     """A ``warnings.showwarning`` that prints an :class:`~peg_ctrl.errors.OutputWarning` (a plot
     or video not written) as one ``peg-sim: warning: ...`` line, and others as ``default`` does."""
@@ -808,7 +807,6 @@ def _one_line_warning(default: Callable[..., None]) -> Callable[..., None]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``peg-sim`` with ``argv`` (default: the process's arguments); returns the exit code."""
-    _choose_gl_backend()
     parser = _parser()
     args = parser.parse_args(argv)
     try:

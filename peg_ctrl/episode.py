@@ -500,15 +500,21 @@ def _result(
         **fields,
         peg_slip_m=grasp.slip if grasp is not None else 0.0,
         time_to_insert_s=time_to_insert,
-        contact_to_seat_s=(
-            time_to_insert - first if time_to_insert is not None and first is not None else None
-        ),
+        contact_to_seat_s=contact_to_seat(first, time_to_insert),
         detail=outcome.detail,
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
         **loop_fields(loop),
     )
+
+
+def contact_to_seat(first_contact_s: float | None, seated_s: float | None) -> float | None:
+    """Time from the first peg-block contact to seated [s]; None unless the peg touched the
+    block before it was seated (a peg dropped into a wide hole may touch the bore only after)."""
+    if first_contact_s is None or seated_s is None or first_contact_s > seated_s:
+        return None
+    return seated_s - first_contact_s
 
 
 def loop_fields(loop: Loop) -> dict[str, Any]:

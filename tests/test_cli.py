@@ -461,3 +461,16 @@ def test_teleop_interrupted_keeps_its_records(tmp_path: Path, monkeypatch: pytes
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert (summary["status"], summary["end"]) == ("interrupted", "interrupted")
     assert read_trace(tmp_path / "forces.npz").shape[0] == summary["total_timesteps"] == 100
+
+
+def test_run_viewer_without_a_display_is_one_line_and_writes_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["run", "--viewer", "--out", str(tmp_path / "run")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [
+        "peg-sim: error: --viewer needs a display (DISPLAY is not set); run without it, or with --video"
+    ]
+    assert not (tmp_path / "run").exists()

@@ -20,6 +20,7 @@ from peg_ctrl.episode import (
     WALL_CLOCK_FIELDS,
     EpisodeConfig,
     RandomizationConfig,
+    contact_to_seat,
     episode_config_from_mapping,
     run_episode,
 )
@@ -266,3 +267,15 @@ def test_divergence_is_detected(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
     result = run_episode(EpisodeConfig(), tmp_path, plot=False)
     assert result.reason == "diverged"
     assert result.total_timesteps <= 510
+
+
+@pytest.mark.parametrize(
+    ("first", "seated", "expected"),
+    [(1.0, 3.5, 2.5), (3.5, 3.5, 0.0), (9.235, 9.155, None), (None, 3.0, None), (1.0, None, None)],
+)
+def test_contact_to_seat_is_none_unless_contact_came_first(
+    first: float | None, seated: float | None, expected: float | None
+) -> None:
+    """A peg seated before it first touched the block (dropped into a wide hole, it meets the
+    bore only afterwards) has no contact-to-seat time, not a negative one."""
+    assert contact_to_seat(first, seated) == expected

@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -244,3 +245,23 @@ def test_bad_actions_are_named() -> None:
         env.step(np.zeros(6, dtype=np.float32))
     with pytest.raises(ValueError, match="finite"):
         env.step(np.full(7, np.nan, dtype=np.float32))
+
+
+def test_rgb_array_renders_headless_with_mujoco_gl_unset(tmp_path: Path) -> None:
+    """No display, no MUJOCO_GL: importing peg_ctrl picks an offscreen backend (EGL, else
+    OSMesa) before mujoco loads, and the env renders a frame."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL")}
+    code = (
+        "import peg_ctrl, os, gymnasium as gym\n"
+        "env = gym.make('peg_ctrl/PegInsertion-v0', render_mode='rgb_array', width=64, height=48)\n"
+        "env.reset(seed=0)\n"
+        "frame = env.render()\n"
+        "print(os.environ['MUJOCO_GL'], frame.shape, frame.dtype, int(frame.max()), sep='|')\n"
+        "env.close()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    backend, shape, dtype, brightest = proc.stdout.strip().split("|")
+    assert backend in ("egl", "osmesa")
+    assert (shape, dtype) == ("(48, 64, 3)", "uint8")
+    assert int(brightest) > 0  # not a blank frame

@@ -24,7 +24,14 @@ import numpy as np
 from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
 from peg_ctrl.config import to_dict
 from peg_ctrl.controllers import ControllerConfig
-from peg_ctrl.episode import EpisodeConfig, RandomizationConfig, compiled_model, contact_fields, loop_fields
+from peg_ctrl.episode import (
+    EpisodeConfig,
+    RandomizationConfig,
+    compiled_model,
+    contact_fields,
+    contact_to_seat,
+    loop_fields,
+)
 from peg_ctrl.episode_log import EpisodeLogger
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text, to_json
@@ -214,7 +221,7 @@ class TeleopSession:
         tti, first = self.task.time_to_insert, fields["first_contact_s"]
         # None unless the peg touched the block before the insertion was detected (the operator
         # may lower it in without touching, then let it fall against the bore).
-        to_seat = tti - first if tti is not None and first is not None and first <= tti else None
+        to_seat = contact_to_seat(first, tti)
         self.summary = {
             "status": status,
             "reason": "" if status == "success" else reason,
