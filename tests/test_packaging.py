@@ -18,6 +18,7 @@ except ImportError:  # Python 3.10
 ROOT = Path(__file__).resolve().parent.parent
 SETUPTOOLS = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
 PACKAGES: list[str] = SETUPTOOLS["packages"]
+DATA_PACKAGES = {"peg_ctrl.data", "peg_ctrl.experiments.configs"}  # folders of data, no code
 
 
 def _package_dir(package: str) -> Path:
@@ -55,13 +56,15 @@ def test_every_package_is_listed_for_the_wheel() -> None:
             rel = init.parent.relative_to(ROOT).parts
             name = ".".join((mapped[rel[0]], *rel[1:])) if rel[0] in mapped else ".".join(rel)
             found.add(name)
-    assert found == set(PACKAGES)
+    assert found == set(PACKAGES) - DATA_PACKAGES
+    for package in DATA_PACKAGES:  # listed with their files as package data
+        assert package in PACKAGES and SETUPTOOLS["package-data"][package]
 
 
 def test_shipped_experiments_are_package_data() -> None:
     configs = sorted(p.name for p in (ROOT / "experiments" / "configs").glob("*"))
     assert configs and all(name.endswith(".yaml") for name in configs)
-    assert "configs/*.yaml" in SETUPTOOLS["package-data"]["peg_ctrl.experiments"]
+    assert SETUPTOOLS["package-data"]["peg_ctrl.experiments.configs"] == ["*.yaml"]
 
 
 def test_python_dash_m_runs_the_cli(tmp_path: Path) -> None:
