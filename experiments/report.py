@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from peg_ctrl.episode import COST_FIELDS
 from peg_ctrl.experiments.stats import ALPHA, compare_arms, episodes_frame, median_ci, wilson_interval
 from peg_ctrl.io import atomic_write_text
 from peg_ctrl.monitors import FIRST_CONTACT_N
@@ -641,16 +642,6 @@ def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
-_COST_COLUMNS = (
-    "control_time_p50_s",
-    "control_time_p99_s",
-    "solve_time_p50_s",
-    "solve_time_p99_s",
-    "solve_period_s",
-    "solve_real_time_factor",
-)
-
-
 def _cost_section(rows: list[dict[str, Any]]) -> list[str]:
     """Wall time of the controller per control step, and of its optimiser per solve, per arm."""
     import pandas as pd
@@ -658,7 +649,7 @@ def _cost_section(rows: list[dict[str, Any]]) -> list[str]:
     df = episodes_frame(rows)
     if "control_time_p50_s" not in df:
         return []
-    for column in _COST_COLUMNS:
+    for column in COST_FIELDS:
         values = df[column].replace("", np.nan) if column in df else np.nan
         df[column] = pd.to_numeric(values, errors="coerce")
     if df["control_time_p50_s"].isna().all():
@@ -677,7 +668,7 @@ def _cost_section(rows: list[dict[str, Any]]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for arm, group in df.groupby("arm", sort=False):
-        us = 1e6 * group[list(_COST_COLUMNS[:4])].median()
+        us = 1e6 * group[list(COST_FIELDS[:4])].median()
         solve = group["solve_period_s"].dropna()
         if solve.empty:
             solver = "– | – | – | –"

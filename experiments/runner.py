@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import to_dict
+from peg_ctrl.episode import COST_FIELDS
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
 from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_stale_temps, to_json
@@ -59,12 +60,7 @@ _SUMMARY_COLUMNS = (
     "total_timesteps",
     "sim_time_s",
     "wall_time_s",
-    "control_time_p50_s",
-    "control_time_p99_s",
-    "solve_time_p50_s",
-    "solve_time_p99_s",
-    "solve_period_s",
-    "solve_real_time_factor",
+    *COST_FIELDS,
     "phantom_contacts",
 )
 

@@ -52,6 +52,7 @@ from peg_ctrl.tasks.base import TaskContext, TaskSpec
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
 
 __all__ = [
+    "COST_FIELDS",
     "WALL_CLOCK_FIELDS",
     "RandomizationConfig",
     "LogConfig",
@@ -162,16 +163,17 @@ def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
     return load(EpisodeConfig, data)
 
 
-# Summary fields measured in wall time: they differ between two runs of the same episode.
-WALL_CLOCK_FIELDS = (
-    "wall_time_s",
+# The summary's fields of what the control costs (see EpisodeResult; columns of a sweep's table).
+COST_FIELDS = (
     "control_time_p50_s",
     "control_time_p99_s",
     "solve_time_p50_s",
     "solve_time_p99_s",
+    "solve_period_s",
     "solve_real_time_factor",
-    "solver_timing",
 )
+# Summary fields measured in wall time: they differ between two runs of the same episode.
+WALL_CLOCK_FIELDS = ("wall_time_s", *(f for f in COST_FIELDS if f != "solve_period_s"), "solver_timing")
 
 
 @dataclasses.dataclass
@@ -525,7 +527,7 @@ def loop_fields(loop: Loop) -> dict[str, Any]:
 
 def timing_fields(loop: Loop) -> dict[str, Any]:
     """The summary's timing fields (see :class:`EpisodeResult`) from the loop and its controller."""
-    fields: dict[str, Any] = dict.fromkeys(WALL_CLOCK_FIELDS[1:-1] + ("solve_period_s",))
+    fields: dict[str, Any] = dict.fromkeys(COST_FIELDS)
     if loop.compute_times:
         p50, p99 = np.percentile(loop.compute_times, [50, 99])
         fields.update(control_time_p50_s=float(p50), control_time_p99_s=float(p99))
