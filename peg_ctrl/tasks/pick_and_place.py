@@ -17,14 +17,27 @@ Phases (one row each in :meth:`PickAndPlaceTask.phase_table`)
     out (outcome ``timeout``; the machine goes on and the success check decides). A grasp that
     closes on nothing ends the episode with ``grasp_lost``.
 
+    The align target rests on one sample of the sensed gripper position; with sensor noise the
+    hand then settles with the peg off the hole axis by that sample's error (0.3-0.5 mm with
+    0.2 mm of noise), and a descent into a tighter fit pushes the held peg into the mouth's
+    edge (130-150 N on a 1 mm chamfer; on a sharp mouth, a force spike). So ``align`` also
+    averages the peg's offset from the gripper over its motion, and if that average predicts
+    the hand settling with the peg off the axis by more than the radial clearance (outcome
+    ``off_axis``), runs again, up to ``CENTER_PASSES`` times, aimed with the average.
+    ``settle`` does not end while a seated hold is under way: the hold decides.
+
 Success
     Peg depth ≥ ``success.min_depth``, lateral error at the mouth ≤ ``success.max_lateral_error``
     and tilt ≤ ``success.max_tilt``, after release, for ``success.consecutive_steps`` control
     steps in a row.
 
 Failure
-    ``timeout`` (the machine finished without success), ``excessive_tilt`` (the peg lies tilted
-    at the end), ``grasp_lost`` (closed on nothing); the loop's monitors add the others.
+    At the hole, when the machine finished without success: ``missed`` (the peg never entered the
+    bore), ``jammed`` or ``wedged`` (stuck in it; :func:`~peg_ctrl.monitors.classify_end_state`),
+    the detail giving its lateral error, tilt and depth now and when it was released;
+    ``excessive_tilt`` (the peg lies tilted at the end); ``timeout`` otherwise (not at the hole,
+    or deep enough but off the axis); ``grasp_lost`` (closed on nothing). The loop's monitors
+    add the others.
 """
 
 from __future__ import annotations
@@ -40,7 +53,14 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import ConfigError, EpisodeFailure
 from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.monitors import InsertionMonitor, SeatedCriterion, SeatedHold, not_at_hole_detail
+from peg_ctrl.monitors import (
+    InsertionMeasure,
+    InsertionMonitor,
+    SeatedCriterion,
+    SeatedHold,
+    classify_end_state,
+    not_at_hole_detail,
+)
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.rotations import quat_mul, rotate_inv, yaw_quat
 from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
@@ -59,6 +79,7 @@ __all__ = [
 
 PHASES = ("approach", "descend", "grasp", "lift", "rotate", "align", "insert", "release", "settle", DONE)
 SETTLED_FOR = 0.2  # the peg must stay slower than settle_speed this long [s]
+CENTER_PASSES = 3  # corrective align passes at most; then the release goes ahead
 
 
 @dataclasses.dataclass(frozen=True)
@@ -203,6 +224,10 @@ class PickAndPlaceTask:
         self._settled_since: float | None = None
         self._grasped = False  # between a successful grasp and the jaw opening
         self._released = False
+        self._center_passes = 0  # corrective align passes so far
+        self._offset_sum = (0.0, 0.0)  # sum of (peg bottom - gripper) XY over align [m]
+        self._offset_n = 0  # samples in it
+        self._at_release: InsertionMeasure | None = None  # the peg when the jaw let go
         self.seated = SeatedHold(success.consecutive_steps)
 
     def phase_table(self) -> dict[str, PhaseSpec]:
@@ -216,7 +241,11 @@ class PickAndPlaceTask:
             "lift": PhaseSpec(self._enter_lift, self._at_height, "rotate", Timeout(c.lift_timeout)),
             "rotate": PhaseSpec(self._enter_rotate, self._upright, "align", Timeout(c.rotation_timeout)),
             "align": PhaseSpec(
-                self._enter_align, self._over_hole, self._after_align, Timeout(c.alignment_timeout)
+                self._enter_align,
+                self._over_hole,
+                self._after_align,
+                Timeout(c.alignment_timeout),
+                tick=self._track_offset,
             ),
             "insert": PhaseSpec(self._enter_insert, self._insert_stopped, "release"),
             "release": PhaseSpec(
@@ -262,6 +291,9 @@ class PickAndPlaceTask:
         data.qpos[:] = initial_qpos(model, self.scene, self.randomization, rng)
         self._settled_since = None
         self._grasped = self._released = False
+        self._center_passes = 0
+        self._offset_sum, self._offset_n = (0.0, 0.0), 0
+        self._at_release = None
         self.seated.reset()
 
     def start(self, obs: Observation) -> None:
@@ -284,19 +316,33 @@ class PickAndPlaceTask:
             self.finish(obs.t, "inserted")
             return Evaluation(True, True, "", "inserted", m)
         if self.machine.phase == DONE:
-            if m.tilt_rad > self.success_cfg.max_tilt:
-                return Evaluation(
-                    True, False, "excessive_tilt", f"peg came to rest tilted {m.tilt_rad:.2f} rad", m
-                )
-            if m.at_hole:
-                detail = (
-                    f"peg not inserted (depth {m.depth_m * 1e3:.1f} mm, "
-                    f"lateral {m.lateral_error_m * 1e3:.1f} mm)"
-                )
-            else:
-                detail = not_at_hole_detail(m)
-            return Evaluation(True, False, "timeout", detail, m)
+            return self._failure(m)
         return Evaluation(False, False, "", "", m)
+
+    def _failure(self, m: InsertionMeasure) -> Evaluation:
+        """The verdict on a machine that finished without a seated peg: where the peg is and why."""
+        tilted = m.tilt_rad > self.success_cfg.max_tilt
+        if not m.at_hole or m.depth_m >= self.success_cfg.min_depth:
+            if tilted:
+                where = f" at the hole: {_pose_text(m)}" if m.at_hole else ""
+                return Evaluation(
+                    True, False, "excessive_tilt", f"peg came to rest tilted {m.tilt_rad:.2f} rad{where}", m
+                )
+            if not m.at_hole:
+                return Evaluation(True, False, "timeout", not_at_hole_detail(m), m)
+            # Deep enough but off the axis, or the seated hold was cut short.
+            lateral = m.lateral_error_m * 1e3
+            detail = f"peg not inserted (depth {m.depth_m * 1e3:.1f} mm, lateral {lateral:.1f} mm)"
+            return Evaluation(True, False, "timeout", detail, m)
+        # Stuck short of the success depth: name how, with where it is and where it was let go.
+        a = self.scene.assets
+        state = classify_end_state(m, clearance=a.clearance, chamfer=a.chamfer, radius=a.peg_radius)
+        stuck = f"{state} after release" if self._released else f"{state}, never released"
+        return Evaluation(True, False, state, f"{stuck}: {_pose_text(m)}{self._release_text()}", m)
+
+    def _release_text(self) -> str:
+        r = self._at_release
+        return f" (released {_pose_text(r)})" if r is not None and r.at_hole else ""
 
     def finish(self, t: float, outcome: str) -> None:
         self.machine.close_record(t, outcome)
@@ -334,11 +380,16 @@ class PickAndPlaceTask:
         )
 
     def _enter_align(self, obs: Observation) -> Motion:
-        # Gripper XY = hole XY - (peg bottom - gripper) XY, measured now.
         hx, hy = self.scene.hole_xy
+        g = self._goal
+        if self._center_passes:
+            # Re-centring: the same target with the offset averaged over align.
+            ox, oy = self._mean_offset()
+            return self._move(Waypoint.of((hx - ox, hy - oy, g.p_world[2]), g.quat_world, g.jaw_sep_m))
+        self._offset_sum, self._offset_n = (0.0, 0.0), 0
+        # Gripper XY = hole XY - (peg bottom - gripper) XY, measured now.
         ox = obs.peg.bottom_world[0] - obs.gripper.p_world[0]
         oy = obs.peg.bottom_world[1] - obs.gripper.p_world[1]
-        g = self._goal
         return self._move(Waypoint.of((hx - ox, hy - oy, g.p_world[2]), g.quat_world, g.jaw_sep_m))
 
     def _enter_insert(self, obs: Observation) -> Motion:
@@ -420,9 +471,30 @@ class PickAndPlaceTask:
         hx, hy = self.scene.hole_xy
         b = obs.peg.bottom_world
         near = math.hypot(b[0] - hx, b[1] - hy) < self.cfg.alignment_distance
-        return "ok" if self._motion_over(obs) and near else None
+        if not (self._motion_over(obs) and near):
+            return None
+        if self._center_passes >= CENTER_PASSES:
+            return "ok"
+        # Where the peg comes to rest once the hand reaches its goal, from the averaged offset.
+        ox, oy = self._mean_offset()
+        g = self._goal.p_world
+        off = math.hypot(g[0] + ox - hx, g[1] + oy - hy)
+        return "off_axis" if off > self.scene.assets.clearance else "ok"
+
+    def _track_offset(self, obs: Observation) -> None:
+        b, p, (sx, sy) = obs.peg.bottom_world, obs.gripper.p_world, self._offset_sum
+        self._offset_sum = (sx + float(b[0] - p[0]), sy + float(b[1] - p[1]))
+        self._offset_n += 1
+
+    def _mean_offset(self) -> tuple[float, float]:
+        """(peg bottom - gripper) XY averaged over align, which averages out sensor noise [m]."""
+        (x, y), n = self._offset_sum, max(self._offset_n, 1)
+        return x / n, y / n
 
     def _after_align(self, obs: Observation) -> str:
+        if self.machine.records[-1].outcome == "off_axis":
+            self._center_passes += 1
+            return "align"
         return "insert" if self.cfg.force_guarded_insert else "release"
 
     def _insert_stopped(self, obs: Observation) -> str | None:
@@ -437,6 +509,8 @@ class PickAndPlaceTask:
             self._let_go(obs)
 
     def _let_go(self, obs: Observation) -> None:
+        if not self._released:
+            self._at_release = self.insertion.last  # as evaluated one control step ago
         self._grasped = False
         self._released = True
 
@@ -452,5 +526,14 @@ class PickAndPlaceTask:
             self._settled_since = None
 
     def _settled(self, obs: Observation) -> str | None:
+        if self.seated.since is not None:
+            return None  # a seated hold is under way: it decides, not the peg's stillness
         since = self._settled_since
         return "ok" if since is not None and obs.t - since >= SETTLED_FOR else None
+
+
+def _pose_text(m: InsertionMeasure) -> str:
+    return (
+        f"peg {m.lateral_error_m * 1e3:.2f} mm off axis, {math.degrees(m.tilt_rad):.2f} deg tilt, "
+        f"depth {m.depth_m * 1e3:.1f} mm"
+    )
