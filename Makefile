@@ -5,6 +5,9 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= runs/demo
+# torch for the RL example (stable-baselines3): a CPU build, installed before the package so that
+# pip does not resolve SB3's bare `torch` to a CUDA build of several GB. Override: make TORCH=...
+TORCH  ?= torch==2.13.0
 # A non-editable copy of the package for mypy (see lint).
 TYPECHECK := $(VENV)/typecheck
 # Files not ignored by .gitignore that differ from the last commit (nothing outside git).
@@ -17,14 +20,18 @@ PKG_SOURCES := pyproject.toml README.md peg_ctrl controllers planners experiment
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet '$(TORCH)'
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $@
 
 install: $(STAMP)
 
-## demo: install, then run the main job: one autonomous episode, headless, with log, plot, video
+## demo: install, then run the main job: one autonomous episode, headless, with log, plot, video;
+## then one held insertion in contact (the featured table's mpc/align, docs/demo/held_insertion.yaml)
+## into $(OUT)/held_insertion, and the loop's overhead benchmark
 demo: $(STAMP) sysdeps
 	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
+	$(BIN)/peg-sim run --config docs/demo/held_insertion.yaml --out $(OUT)/held_insertion
 	$(BIN)/peg-sim bench --controller pd --task default --out $(OUT)/bench.json --repeats 3 --throughput-episodes 0
 
 ## sysdeps: EGL/Mesa for offscreen rendering, installed only if missing (Debian, needs root)

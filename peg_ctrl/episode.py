@@ -40,6 +40,7 @@ from peg_ctrl.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.physics import PhysicsConfig, check_scene
 from peg_ctrl.physics import profile as physics_profile
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
+from peg_ctrl.progress import progress_bar
 from peg_ctrl.recorders import (
     CallbackRecorder,
     StateRecorder,
@@ -50,6 +51,7 @@ from peg_ctrl.recorders import (
 from peg_ctrl.scene import SceneConfig, build_model
 from peg_ctrl.tasks.base import TaskContext, TaskSpec
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
+from peg_ctrl.timing import control_decimation
 
 __all__ = [
     "COST_FIELDS",
@@ -139,6 +141,8 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         check_scene(self.physics.profile, self.scene)
+        # Refused here, before an episode writes anything, rather than when the loop is built.
+        control_decimation(self.controller.control_dt, physics_profile(self.physics.profile).timestep)
         self.task.check(self.scene)
         if self.planner not in PLANNERS:
             raise ConfigError(f"unknown planner {self.planner!r}; known: {', '.join(sorted(PLANNERS))}")
@@ -338,12 +342,15 @@ def run_episode(
     video: bool = False,
     plot: bool = True,
     on_step: Callable[[mujoco.MjModel, mujoco.MjData], None] | None = None,
+    progress: bool = True,
 ) -> EpisodeResult:
     """Run one episode headless, writing ``summary.json``, ``config.json``, logs, ``states.npz``
     (for :mod:`peg_ctrl.replay`), plot (and video).
 
     ``on_step`` (e.g. a viewer sync) is called after every control step. Ctrl-C writes the
-    results so far (status ``interrupted``) and re-raises :class:`KeyboardInterrupt`.
+    results so far (status ``interrupted``) and re-raises :class:`KeyboardInterrupt`. With
+    ``video`` (rendering makes the episode several times slower) and ``progress``, a bar counts
+    the video's frames (see :mod:`peg_ctrl.progress`).
 
     Every file is complete or absent. ``summary.json`` is written as soon as the episode ends,
     before the force trace is packed and before the optional plot and video, and rewritten when
@@ -363,6 +370,7 @@ def run_episode(
     atomic_write_text(out_dir / "config.json", to_json(to_dict(cfg), indent=2) + "\n")
     logger = EpisodeLogger(out_dir)
     camera: VideoRecorder | None = None
+    bar: Any = None
     try:
         loop = build_loop(cfg)
         steps_log = StepLogRecorder(logger, cfg.log.interval)
@@ -371,9 +379,14 @@ def run_episode(
         trace = TraceRecorder(logger, loop.task.phases) if cfg.log.trace else None
         if trace is not None:
             recorders.insert(0, trace)
-        camera = VideoRecorder(loop.model, out_dir / "episode.mp4") if video else None
-        if camera is not None:
-            recorders.append(camera)
+        if video:
+            camera = VideoRecorder(loop.model, out_dir / "episode.mp4")
+            dt = float(loop.model.opt.timestep)
+            # A bar of the frames rendered so far (one per 1/fps s of simulated time), up to the
+            # step limit's worth.
+            frames_max = math.floor(cfg.step_limit(dt) * dt * camera.fps) + 1
+            bar = progress_bar(total=frames_max, desc="video", unit="frame", enabled=progress)
+            recorders += [camera, _frame_counter(camera, bar)]
         if on_step is not None:
             recorders.append(CallbackRecorder(on_step))
         loop.recorders = recorders
@@ -396,7 +409,10 @@ def run_episode(
         failed: list[OutputError] = []
         if camera is not None:
             result.video_path = _artefact("video", camera.close, failed)
-            camera = None
+            if result.video_path is not None:  # whole, though the episode ended before its limit
+                bar.total = bar.n
+            bar.close()
+            camera = bar = None
         if plot:
             from peg_ctrl.plots import plot_force_profile
 
@@ -412,11 +428,19 @@ def run_episode(
             raise failed[0]
     finally:
         logger.abort()
+        if bar is not None:
+            bar.close()
         if camera is not None:
             camera.discard()
     if outcome.status == "interrupted":
         raise KeyboardInterrupt
     return result
+
+
+def _frame_counter(camera: VideoRecorder, bar: Any) -> CallbackRecorder:
+    """A recorder that brings ``bar`` (a :func:`~peg_ctrl.progress.progress_bar`) to the number
+    of frames ``camera`` has rendered."""
+    return CallbackRecorder(lambda model, data: bar.update(camera.frames - bar.n))
 
 
 def _write_summary(path: Path, result: EpisodeResult) -> None:

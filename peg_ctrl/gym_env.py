@@ -43,12 +43,28 @@ y, z]`` with ``w >= 0``)
     ``gymnasium.wrappers.FlattenObservation`` for a single vector.
 
 Reward (``reward_mode=``)
-    ``"sparse"`` (default): 1 on the step the peg is seated, else 0. ``"shaped"``:
-    ``-d_goal / 0.01 - d_reach / 0.01 - max(0, F - 10 N) / 10 N + 10 * success``, where
-    ``d_goal`` [m] is the distance from the peg's lower end to the seated goal (on the hole axis,
-    ``success.min_depth`` below the mouth), ``d_reach`` [m] the distance from the pinch point to
-    the peg's centre (``pick_and_place`` only; 0 for ``held_insertion``) and ``F`` [N] the
-    control period's peak peg-block contact force. ``info["reward_terms"]`` has the parts.
+    Built so that the undiscounted return orders the outcomes: **any failure < holding still
+    until truncation < any success**, in both modes (``tests/test_gym_env.py`` checks it on
+    the physics). ``"sparse"`` (default): ``+1`` on the step the peg is seated, ``-1`` on the
+    step a monitor fails the episode, else 0. ``"shaped"``: ``+3`` seated, ``-3`` failed, plus
+    two bounded shaping terms on every step:
+
+    - ``progress = closeness_now - closeness_before`` (potential-based shaping, Ng et al.
+      1999: it pays for moving towards the goal when it happens, and sums over an episode to
+      the closeness gained, in ``[-1, 1]``); ``closeness = 1 - tanh(d_goal / 0.03 m)`` for
+      ``held_insertion``, the mean of that and ``1 - tanh(d_reach / 0.1 m)`` for
+      ``pick_and_place``;
+    - ``force_penalty = -0.5 * tanh(max(0, F - 10 N) / 10 N) / max_steps``, which sums to at
+      least -0.5 over an episode.
+
+    ``d_goal`` [m] is the distance from the peg's lower end to the seated goal (the hole axis
+    from ``success.min_depth`` below the mouth down), ``d_reach`` [m] the distance from the
+    pinch point to the peg's centre and ``F`` [N] the control period's peak peg-block contact
+    force. So a success returns at least 1.5, holding still between -1.5 and 1 (about 0: the
+    peg does not move), a failure at most -2. ``info["reward_terms"]`` has the parts: the
+    factors ``goal``, ``reach`` (1 for ``held_insertion``), ``closeness`` (each in ``[0, 1]``)
+    and the summands ``progress``, ``force_penalty``, ``success``, ``failure`` (their sum is
+    the reward).
 
 Termination and truncation
     ``terminated`` when the peg is seated (``info["success"]``: depth ≥ ``success.min_depth``,
@@ -68,6 +84,8 @@ Other keyword arguments of ``gymnasium.make``
     mapping of :class:`~peg_ctrl.scene.SceneConfig` fields, e.g. ``{"assets": {"clearance":
     1e-4, "chamfer": 1e-3}}``); ``config`` (a base episode config: a mapping or a file path, which
     the other arguments override); ``randomize`` (the pick-and-place start pose, default True);
+    ``fixed_jaw`` (``held_insertion`` only, default False: keep the jaw closed on the peg and
+    ignore the action's ``jaw``, so that exploration cannot drop the peg);
     ``render_mode`` (``"rgb_array"`` or ``"human"``), ``width`` and ``height`` [px].
 
 Seeding
@@ -121,9 +139,14 @@ WORKSPACE = ((-0.45, -0.3, 0.0), (0.45, 0.3, 0.4))
 MAX_SPEED = 0.2  # [m/s] of a full delta action
 MAX_ANGULAR_SPEED = 2.0  # [rad/s] of a full delta action
 TIME_LIMIT_S = {"held_insertion": 5.0, "pick_and_place": 20.0}  # default episode length [s of sim]
-SUCCESS_BONUS = 10.0
+#: Terminal rewards ``(success, failure)`` per reward mode. The shaped mode's exceed twice its
+#: shaping's bound (progress in [-1, 1], force penalty in [-0.5, 0] per episode): any success
+#: >= 1.5 > 1 >= holding still >= -1.5 > -2 >= any failure.
+TERMINAL_REWARD = {"sparse": (1.0, -1.0), "shaped": (3.0, -3.0)}
 FORCE_FREE_N = 10.0  # the shaped reward penalises peg-block force above this [N]
-DISTANCE_SCALE_M = 0.01  # the shaped reward's distances are in units of this [m]
+FORCE_PENALTY = 0.5  # the force penalty's bound over a whole episode
+GOAL_SCALE_M = 0.03  # distance of the peg's lower end from the seated goal at which closeness is 0.24
+REACH_SCALE_M = 0.1  # the same for the pinch point's distance from the peg (pick_and_place)
 
 
 class AgentTask:
@@ -259,6 +282,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         scene: Mapping[str, Any] | None = None,
         config: Mapping[str, Any] | str | os.PathLike[str] | None = None,
         randomize: bool = True,
+        fixed_jaw: bool = False,
         action_mode: str = "delta",
         reward_mode: str = "sparse",
         time_limit_s: float | None = None,
@@ -299,6 +323,12 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self.hole_pos = np.array([hx, hy, a.block_size[2]])
         self._goal = self.hole_pos - np.array([0.0, 0.0, m])
         self._reach = self.cfg.task.name == "pick_and_place"
+        if fixed_jaw and self.cfg.task.name != "held_insertion":
+            raise ConfigError(
+                f"fixed_jaw=True needs task held_insertion (the peg starts in the hand), got task "
+                f"{self.cfg.task.name!r}, whose agent must open and close the jaw"
+            )
+        self.fixed_jaw = bool(fixed_jaw)
 
         inf = np.inf
         self.observation_space = spaces.Dict(
@@ -329,6 +359,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self._wall0 = 0.0
         self._steps = 0
         self._done = True
+        self._closeness_before = 0.0  # the shaped reward's potential at the last step
 
     # -- building ---------------------------------------------------------------------------------
     def _build(self, cfg: EpisodeConfig) -> None:
@@ -353,6 +384,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self._done = False
         self._wall0 = time.perf_counter()
         m = self.task.insertion.measure(obs.peg)
+        self._closeness_before = self._closeness(self.loop.state())["closeness"]
         info = self._info(m, success=False, reason="")
         if self.render_mode == "human":
             self.render()
@@ -382,7 +414,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         truncated = not terminated and self._steps >= self.max_steps
         self._done = terminated or truncated
         state = self.loop.state()
-        reward, terms = self._reward(success, state)
+        reward, terms = self._reward(state, success=success, failed=bool(reason))
         info = self._info(m, success=success, reason=reason)
         info["reward_terms"] = terms
         if self.render_mode == "human":
@@ -405,7 +437,8 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             low, high = self.action_space.low, self.action_space.high  # type: ignore[attr-defined]
             u = np.clip(a, low, high)
             q = euler_to_quat(*u[3:6])
-            return GripperTarget.trusted(u[:3], q, np.zeros(3), np.zeros(3), float(u[6]))
+            jaw = 0.0 if self.fixed_jaw else float(u[6])
+            return GripperTarget.trusted(u[:3], q, np.zeros(3), np.zeros(3), jaw)
         a = np.clip(a, -1.0, 1.0)
         s = self.loop.state()
         dt = self.control_dt
@@ -415,7 +448,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         p = np.clip(s.p_world + v * dt, low, high)
         q = quat_mul(euler_to_quat(*(w_world * dt)), s.quat_world)
         q /= np.linalg.norm(q)
-        jaw = 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
+        jaw = 0.0 if self.fixed_jaw else 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
         return GripperTarget.trusted(p, q, v, rotate_inv(q, w_world), jaw)
 
     def _observation(self, s: ControlState) -> dict[str, NDArray[np.float32]]:
@@ -437,22 +470,29 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             "hole_pos": self.hole_pos.astype(f32),
         }
 
-    def _reward(self, success: bool, s: ControlState) -> tuple[float, dict[str, float]]:
-        if self.reward_mode == "sparse":
-            return float(success), {"success": float(success)}
+    def _reward(self, s: ControlState, *, success: bool, failed: bool) -> tuple[float, dict[str, float]]:
+        win, lose = TERMINAL_REWARD[self.reward_mode]
+        terms = {"success": win * success, "failure": lose * failed}
+        if self.reward_mode == "shaped":
+            factors = self._closeness(s)
+            excess = max(0.0, self._last.block_force - FORCE_FREE_N) / FORCE_FREE_N
+            terms |= factors
+            terms["progress"] = factors["closeness"] - self._closeness_before
+            terms["force_penalty"] = -FORCE_PENALTY * math.tanh(excess) / self.max_steps
+            self._closeness_before = factors["closeness"]
+        return sum(terms[k] for k in ("success", "failure", "progress", "force_penalty") if k in terms), terms
+
+    def _closeness(self, s: ControlState) -> dict[str, float]:
+        """The shaped reward's potential and its factors, each in ``[0, 1]`` (1 at the goal)."""
         peg = self.loop.peg
         assert peg is not None
-        d_goal = float(np.linalg.norm(peg.bottom_world - self._goal))
-        d_reach = 0.0
-        if self._reach:
-            d_reach = float(np.linalg.norm(s.p_world - peg.p_world))
-        terms = {
-            "goal": -d_goal / DISTANCE_SCALE_M,
-            "reach": -d_reach / DISTANCE_SCALE_M,
-            "force": -max(0.0, self._last.block_force - FORCE_FREE_N) / FORCE_FREE_N,
-            "success": SUCCESS_BONUS * float(success),
-        }
-        return float(sum(terms.values())), terms
+        off = peg.bottom_world - self._goal
+        off[2] = max(0.0, off[2])  # deeper than min_depth is on the goal
+        goal = 1.0 - math.tanh(float(np.linalg.norm(off)) / GOAL_SCALE_M)
+        if not self._reach:
+            return {"goal": goal, "reach": 1.0, "closeness": goal}
+        reach = 1.0 - math.tanh(float(np.linalg.norm(s.p_world - peg.p_world)) / REACH_SCALE_M)
+        return {"goal": goal, "reach": reach, "closeness": 0.5 * (goal + reach)}
 
     def _info(self, m: Any, *, success: bool, reason: str) -> dict[str, Any]:
         depth, lateral, tilt = (math.nan if v is None else float(v) for v in m.hole_metrics())

@@ -94,6 +94,7 @@ def replay(
     video: str | os.PathLike[str] | None = None,
     viewer: bool = False,
     speed: float = 1.0,
+    progress: bool = True,
 ) -> Path | None:
     """Replay the episode in ``run_dir``.
 
@@ -105,6 +106,8 @@ def replay(
         viewer: show the replay in MuJoCo's passive viewer instead (needs a display), paced
             at ``speed`` times real time.
         speed: simulated seconds per second of replay, > 0 (0.5: half speed).
+        progress: show a bar counting the video's frames on stderr (see
+            :mod:`peg_ctrl.progress`: only on a terminal, or with ``PEG_SIM_PROGRESS=1``).
 
     Returns:
         The video's path, or None for a viewer replay.
@@ -126,17 +129,21 @@ def replay(
     if viewer:
         _replay_in_viewer(model, t, qpos, speed)
         return None
+    from peg_ctrl.progress import progress_bar
     from peg_ctrl.recorders import VideoRecorder
 
     out = prepare_output_file(video if video is not None else Path(run_dir) / "replay.mp4")
     data = mujoco.MjData(model)
     recorder = VideoRecorder(model, out, fps=REPLAY_FPS)
+    states = _state_index(t, frame_times(t, fps=REPLAY_FPS, speed=speed))
     try:
-        for i in _state_index(t, frame_times(t, fps=REPLAY_FPS, speed=speed)):
-            data.qpos[:] = qpos[i]
-            data.time = t[i]
-            mujoco.mj_forward(model, data)
-            recorder.add_frame(data)
+        with progress_bar(total=len(states), desc="replay", unit="frame", enabled=progress) as bar:
+            for i in states:
+                data.qpos[:] = qpos[i]
+                data.time = t[i]
+                mujoco.mj_forward(model, data)
+                recorder.add_frame(data)
+                bar.update(1)
     except OSError as exc:
         recorder.discard()
         raise write_error(out, exc) from None

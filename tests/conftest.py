@@ -13,6 +13,10 @@ from pathlib import Path
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
+# peg_ctrl first: it sets one BLAS thread, read when numpy's BLAS loads; the tests then run
+# with the threads a user's `peg-sim` has (two threads change qpOASES's rounding in the mpc).
+import peg_ctrl  # noqa: E402, F401, I001
+
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

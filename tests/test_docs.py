@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-PAGES = ("api.md",)
+PAGES = ("api.md", "rl.md")
 _BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -40,3 +40,67 @@ def test_example_runs(where: str, code: str, tmp_path: Path, monkeypatch: pytest
     module = types.ModuleType("docs_example")
     monkeypatch.setitem(sys.modules, module.__name__, module)
     exec(compile(code, where, "exec"), module.__dict__)  # noqa: S102 - our own documentation
+
+
+# -- the held-insertion episode the README and `make demo` run ----------------------------------
+
+ROOT = DOCS.parent
+HELD_INSERTION = DOCS / "demo" / "held_insertion.yaml"
+# The row of the featured comparison it reproduces: mpc/align, friction 0.3, 1 mm, no tilt, seed 0.
+HELD_INSERTION_KEY = "5789fbeb1161604a"
+
+
+def _contact_hard_row(key: str) -> dict[str, str]:
+    import csv
+
+    with open(DOCS / "contact_hard" / "episodes.csv", newline="") as fh:
+        (row,) = [r for r in csv.DictReader(fh) if r["key"] == key]
+    return row
+
+
+def test_the_held_insertion_config_is_a_contact_hard_episode() -> None:
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.episode import episode_config_from_mapping
+    from peg_ctrl.experiments.config import expand, load_experiment
+
+    cfg = episode_config_from_mapping(read_mapping(HELD_INSERTION))
+    (job,) = [
+        j
+        for j in expand(load_experiment(ROOT / "experiments" / "configs" / "contact_hard.yaml"))
+        if j.config == cfg
+    ]
+    assert job.key == HELD_INSERTION_KEY
+    row = _contact_hard_row(job.key)
+    cell = {k: row[k] for k in ("arm", "seed", "scene.friction", "task.lateral_error", "task.tilt_error")}
+    assert cell == {
+        "arm": "mpc/align",
+        "seed": "0",
+        "scene.friction": "0.3",
+        "task.lateral_error": "0.001",
+        "task.tilt_error": "0.0",
+    }
+
+
+@pytest.mark.slow
+def test_the_held_insertion_config_reproduces_its_sweep_episode(tmp_path: Path) -> None:
+    import json
+
+    from peg_ctrl.episode import WALL_CLOCK_FIELDS
+
+    from .conftest import peg_sim
+
+    # In a fresh interpreter, as the README runs it: this one imported numpy before peg_ctrl, so its
+    # BLAS runs more than one thread, which changes the MPC's results in the 11th digit.
+    proc = peg_sim(["run", "--config", str(HELD_INSERTION), "--out", str(tmp_path)], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    row = _contact_hard_row(HELD_INSERTION_KEY)
+    compared = [k for k in row if k in summary and k not in {*WALL_CLOCK_FIELDS, "log_path"}]
+    assert {"status", "peak_contact_force_n", "time_to_insert_s", "total_timesteps"} <= set(compared)
+    for name in compared:
+        value = summary[name]
+        expected = row[name]
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            assert value == float(expected), name
+        else:
+            assert ("" if value is None else str(value)) == expected, name

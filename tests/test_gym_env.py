@@ -180,7 +180,7 @@ def test_opening_the_jaw_terminates_with_grasp_lost_or_tilt() -> None:
             break
     assert terminated and not info["success"]
     assert info["reason"] in ("grasp_lost", "excessive_tilt")
-    assert reward == 0.0
+    assert reward == -1.0  # the sparse reward's failure penalty
     with pytest.raises(RuntimeError, match="reset"):
         env.step(up_open)
 
@@ -197,18 +197,26 @@ def test_time_limit_truncates() -> None:
 def test_shaped_reward_grows_as_the_peg_goes_in() -> None:
     env = gym.make(ENV_ID, reward_mode="shaped", task={"name": "held_insertion", "lateral_error": 0.0005})
     env.reset(seed=0)
-    rewards, terms = [], None
+    rewards, terms = [], []
     for _ in range(1000):
         _, reward, terminated, truncated, info = env.step(DOWN)
         rewards.append(reward)
-        terms = info["reward_terms"]
+        terms.append(info["reward_terms"])
         if terminated or truncated:
             break
     assert info["success"]
-    assert set(terms) == {"goal", "reach", "force", "success"}
-    assert terms["success"] == 10.0 and terms["reach"] == 0.0
-    assert rewards[-1] > rewards[0] + 10.0  # bonus, and the goal distance shrank
-    assert rewards[0] < -1.0  # the lower end started centimetres from the seated goal
+    assert set(terms[-1]) == {"goal", "reach", "closeness", "progress", "force_penalty", "success", "failure"}
+    assert terms[-1]["success"] == 3.0 and terms[-1]["failure"] == 0.0 and terms[-1]["reach"] == 1.0
+    max_steps = env.unwrapped.max_steps
+    for t, r in zip(terms, rewards, strict=True):
+        assert 0.0 <= t["goal"] == t["closeness"] <= 1.0
+        assert -0.5 / max_steps <= t["force_penalty"] <= 0.0
+        assert r == pytest.approx(t["progress"] + t["force_penalty"] + t["success"] + t["failure"])
+    # Potential-based: the progress terms sum to the closeness gained.
+    gained = terms[-1]["closeness"] - (terms[0]["closeness"] - terms[0]["progress"])
+    assert sum(t["progress"] for t in terms) == pytest.approx(gained)
+    assert terms[-1]["goal"] > 0.9 > 0.5 > terms[0]["goal"]  # seated against centimetres above
+    assert sum(t["progress"] > 0 for t in terms) > 0.8 * len(terms)  # paid as the peg goes down
 
 
 def test_pick_and_place_start_and_reach_term() -> None:
@@ -217,8 +225,63 @@ def test_pick_and_place_start_and_reach_term() -> None:
     assert abs(obs["peg_pos"][2] - 0.01) < 2e-3  # lying on the table (radius 10 mm)
     _, _, _, _, info = env.step(np.zeros(7, dtype=np.float32))
     d = np.linalg.norm(obs["gripper_pos"] - obs["peg_pos"])
-    assert info["reward_terms"]["reach"] == pytest.approx(-d / 0.01, rel=0.05)
+    assert info["reward_terms"]["reach"] == pytest.approx(1.0 - np.tanh(d / 0.1), rel=0.05)
     assert env.unwrapped.max_steps == 4000  # 20 s at 200 Hz
+
+
+HOLD = np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32)  # stay, jaw closed
+LIFT_OPEN = np.array([0, 0, 0.5, 0, 0, 0, -1], dtype=np.float32)
+TWIST = np.array([0.5, 0, -0.5, 1, 0, 0, 1], dtype=np.float32)  # roll hard while descending
+
+
+def _episode_return(mode: str, policy, seed: int = 0, **kwargs) -> tuple[float, dict]:  # type: ignore[no-untyped-def]
+    env = gym.make(
+        ENV_ID,
+        reward_mode=mode,
+        task={"name": "held_insertion", "lateral_error": 0.0005},
+        time_limit_s=2.0,
+        **kwargs,
+    )
+    env.reset(seed=seed)
+    total, step = 0.0, 0
+    while True:
+        _, reward, terminated, truncated, info = env.step(policy(step))
+        total += reward
+        step += 1
+        if terminated or truncated:
+            env.close()
+            return total, {**info, "truncated": truncated}
+
+
+@pytest.mark.parametrize("mode", ["sparse", "shaped"])
+def test_returns_order_failure_below_holding_still_below_success(mode: str) -> None:
+    """The reward teaches: every failure (early, after progress, by tilt or by a dropped peg)
+    returns less than holding still until truncation, which returns less than a success."""
+    success, s_info = _episode_return(mode, lambda n: DOWN)
+    hold, h_info = _episode_return(mode, lambda n: HOLD)
+    assert s_info["success"] and h_info["truncated"] and not h_info["success"]
+    failures = {
+        "open at once": _episode_return(mode, lambda n: LIFT_OPEN),
+        "open near the hole": _episode_return(mode, lambda n: DOWN if n < 30 else LIFT_OPEN),
+        "tilt near the hole": _episode_return(mode, lambda n: DOWN if n < 30 else TWIST),
+    }
+    rng = np.random.default_rng(7)
+    random_actions = rng.uniform(-1, 1, size=(400, 7)).astype(np.float32)
+    failures["random actions"] = _episode_return(mode, lambda n: random_actions[n])
+    for name, (ret, info) in failures.items():
+        assert info["reason"] in ("grasp_lost", "excessive_tilt", "force_spike"), (name, info)
+        assert ret < hold, (name, ret, hold)
+    assert max(r for r, _ in failures.values()) < hold < success
+    if mode == "shaped":  # the documented bounds: failure <= -2 < -1.5 <= hold <= 1 < 1.5 <= success
+        assert max(r for r, _ in failures.values()) <= -2.0 and -1.5 <= hold <= 1.0 and success >= 1.5
+        assert abs(hold) < 0.1  # holding still gains little closeness (the gripper settles a little)
+
+
+def test_fixed_jaw_keeps_the_peg_in_the_hand() -> None:
+    ret, info = _episode_return("sparse", lambda n: LIFT_OPEN, fixed_jaw=True)
+    assert info["truncated"] and info["reason"] == "" and ret == 0.0  # opening was ignored
+    with pytest.raises(ConfigError, match="fixed_jaw=True needs task held_insertion"):
+        gym.make(ENV_ID, task="pick_and_place", fixed_jaw=True)
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ import pytest
 from peg_ctrl.cli import main
 from peg_ctrl.config import ConfigError
 from peg_ctrl.episode import EpisodeConfig, run_episode
+from peg_ctrl.progress import ENV_VAR
 from peg_ctrl.replay import REPLAY_FPS, extract_frames, frame_times, replay
 
 
@@ -55,6 +56,22 @@ def test_replay_writes_beside_the_run_by_default(run: Path, tmp_path: Path) -> N
     assert len(_frames(copy / "replay.mp4")) == len(
         frame_times(np.array([0.0, 0.6]), fps=REPLAY_FPS, speed=3.0)
     )
+
+
+def test_replay_shows_a_bar_over_the_frames_only_when_asked(
+    run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    frames = len(frame_times(np.array([0.0, 0.6]), fps=REPLAY_FPS, speed=3.0))
+    argv = ["replay", str(run), "--speed", "3", "--video"]
+    monkeypatch.setenv(ENV_VAR, "1")
+    assert main([*argv, str(tmp_path / "shown.mp4")]) == 0
+    out, err = capsys.readouterr()
+    assert out.strip() == f"wrote {tmp_path / 'shown.mp4'}"
+    assert "replay: 100%" in err and f"{frames}/{frames}" in err, err
+    monkeypatch.delenv(ENV_VAR)
+    assert main([*argv, str(tmp_path / "hidden.mp4")]) == 0
+    assert capsys.readouterr().err == ""  # stderr is not a terminal here: no bar
+    assert len(_frames(tmp_path / "shown.mp4")) == len(_frames(tmp_path / "hidden.mp4")) == frames
 
 
 def test_frame_times_follow_the_speed() -> None:

@@ -83,7 +83,7 @@ class TeleopConfig:
     jaw_accel: float = 0.4  # [m/s^2]
     deadzone: float = 0.02  # velocities below this fraction of full speed count as zero
     fine_scale: float = 0.2  # speed factor while Shift is held
-    max_steps: int = 50_000  # SPEC §5
+    max_steps: int = 50_000  # SPEC §5; steps of the seed profile (1 ms: 50 s), the same time in others
     log_every: int = 100
     save_every: int = 1_000
     check_every: int = 500

@@ -37,7 +37,8 @@ from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.loop import Loop, StepInfo
 from peg_ctrl.monitors import ContactMonitor
-from peg_ctrl.physics import PhysicsConfig
+from peg_ctrl.physics import SEED, PhysicsConfig
+from peg_ctrl.physics import profile as physics_profile
 from peg_ctrl.recorders import StateRecorder, TraceRecorder, step_record
 from peg_ctrl.scene import HOME_KEY, SceneConfig
 from peg_ctrl.state import ControlState, PegObservation, StateReader
@@ -52,36 +53,46 @@ _SIMULATION_FIELDS = ("controller", "seed", "randomization", "domain", "scene", 
 
 
 class TeleopSession:
-    """Simulation, controller, key mapping, insertion checks and logging for one teleop episode."""
+    """Simulation, controller, key mapping, insertion checks and logging for one teleop episode.
+
+    ``controller`` is a registered name or a controller config; ``scene`` and ``physics`` (default
+    the seed profile) build the model. They are checked as an episode config's are
+    (:class:`~peg_ctrl.episode.EpisodeConfig`) before anything is written.
+    """
 
     def __init__(
         self,
         out_dir: Path,
         *,
-        controller: str = "pd",
+        controller: str | ControllerConfig = "pd",
         seed: int = 0,
         randomize: bool = False,
         config: TeleopConfig | None = None,
         scene: SceneConfig | None = None,
+        physics: PhysicsConfig | None = None,
     ) -> None:
         self.cfg = config or TeleopConfig()
         self.scene = scene or SceneConfig()
-        self.physics = "seed"  # the profile teleoperation runs in (README: physics profiles)
-        self.model = compiled_model(self.scene, self.physics)
-        self.controller_name = controller
-        self.seed = seed
-        self.randomize = randomize
-        self.out_dir = Path(out_dir)
-        ctrl_cfg = ControllerConfig.select(controller)
-        ctrl = ctrl_cfg.build(self.model)
-        self.logger = EpisodeLogger(self.out_dir)
+        ctrl_cfg = ControllerConfig.select(controller)  # a name or a config
+        # Validated as an episode's config is (a scene field the profile sets is refused).
         episode = EpisodeConfig(
             controller=ctrl_cfg,
             seed=seed,
             randomization=RandomizationConfig(enabled=randomize),
             scene=self.scene,
-            physics=PhysicsConfig(self.physics),
+            physics=physics or PhysicsConfig(),
         )
+        self.physics = episode.physics.profile  # the profile's name, as in an episode's summary
+        self.model = compiled_model(self.scene, self.physics)
+        self.controller_name = ctrl_cfg.name
+        self.seed = seed
+        self.randomize = randomize
+        self.out_dir = Path(out_dir)
+        ctrl = ctrl_cfg.build(self.model)
+        decimation = control_decimation(ctrl.control_dt, self.model.opt.timestep)  # before any output
+        # The step limit is SPEC §5's, in steps of the seed profile; a finer step gets the same time.
+        self.max_steps = round(self.cfg.max_steps * SEED.timestep / self.model.opt.timestep)
+        self.logger = EpisodeLogger(self.out_dir)
         resolved = {k: v for k, v in to_dict(episode).items() if k in _SIMULATION_FIELDS}
         atomic_write_text(self.out_dir / "config.json", _json(resolved))
         # The mapper starts at the home pose, jaw open; the task resets it on every attempt.
@@ -91,7 +102,6 @@ class TeleopSession:
         self.mapper = TeleopMapper(
             self.cfg, p_world=s.p_world, quat_world=s.quat_world, jaw_sep_m=JAW_SEP_MAX_M
         )
-        decimation = control_decimation(ctrl.control_dt, self.model.opt.timestep)
         self.task = TeleopTask(
             self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=decimation
         )
@@ -104,6 +114,7 @@ class TeleopSession:
             scene=self.scene,
             contact=ContactMonitor(force_spike=None),
             recorders=[self.trace, self.states, self],
+            phantom_depth=physics_profile(self.physics).phantom_depth,
         )
         self.data = self.loop.data
         self.attempt = 1
@@ -119,7 +130,8 @@ class TeleopSession:
                 "event": "teleop_start",
                 "seed": seed,
                 "randomize": randomize,
-                "controller": controller,
+                "controller": self.controller_name,
+                "physics": self.physics,
                 "teleop": to_dict(self.cfg),
             }
         )
@@ -159,7 +171,7 @@ class TeleopSession:
             except EpisodeFailure as failure:  # e.g. diverged: end with the records so far
                 self.finish(failure.reason, detail=failure.detail)
                 return
-            if self.step_count >= self.cfg.max_steps:
+            if self.step_count >= self.max_steps:
                 self.finish("timeout")
 
     def _reset(self) -> None:
