@@ -30,14 +30,25 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
 from peg_ctrl.config import ConfigError
 from peg_ctrl.gym_env import ENV_ID
 from peg_ctrl.io import atomic_write_text, prepare_output_dir, to_json
 from peg_ctrl.progress import progress_bar
 
-__all__ = ["PPOSettings", "Evaluation", "make_env", "evaluate", "train", "plot_curve", "main"]
+__all__ = [
+    "PPOSettings",
+    "Evaluation",
+    "TranslationOnly",
+    "make_env",
+    "evaluate",
+    "train",
+    "plot_curve",
+    "main",
+]
 
 #: The environment the example trains on (keyword arguments of ``gymnasium.make``).
 #: A scripted straight descent seats the peg in under 1 s, so 2 s episodes (400 steps) leave room.
@@ -47,6 +58,7 @@ ENV_KWARGS: dict[str, Any] = {
     "reward_mode": "shaped",
     "time_limit_s": 2.0,
 }
+ACTION_SETS = ("translation", "full")  # what the policy commands (see TranslationOnly)
 EVAL_SEED0 = 10_000  # evaluation episodes use seeds EVAL_SEED0, EVAL_SEED0 + 1, ... (never trained on)
 
 
@@ -58,13 +70,17 @@ class PPOSettings:
     eval_every: int = 12_288  # environment steps between evaluations
     eval_episodes: int = 10  # episodes per evaluation (seeds EVAL_SEED0 ...)
     seed: int = 0  # PPO's and the training environment's seed
-    normalize: bool = True  # VecNormalize on the observations (not the reward)
+    normalize: bool = True  # VecNormalize on the observations
+    # ... and on the reward (returns scaled to unit variance for the value function; the
+    # evaluation reports the environment's own reward)
+    normalize_reward: bool = True
     n_steps: int = 2048  # PPO's rollout length per update (SB3's default)
     batch_size: int = 64  # PPO's minibatch (SB3's default)
     # The policy's initial exploration noise, log of its std in units of a full action. SB3's
     # default 0 (std 1) jerks the hand by up to 1 mm per 5 ms step; -1 (std 0.37) explores less
     # violently in a 1 mm clearance.
     log_std_init: float = -1.0
+    actions: str = "translation"  # "translation" (TranslationOnly) or "full" (the env's 7-D action)
     env: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -72,6 +88,8 @@ class PPOSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+        if self.actions not in ACTION_SETS:
+            raise ConfigError(f"actions must be one of {', '.join(ACTION_SETS)}, got {self.actions!r}")
 
     def env_kwargs(self) -> dict[str, Any]:
         return {**ENV_KWARGS, **dict(self.env)}
@@ -91,14 +109,34 @@ class Evaluation:
     train_episodes: int
 
 
-def make_env(**kwargs: Any) -> Any:
-    """``gymnasium.make(ENV_ID, **kwargs)`` in SB3's ``Monitor`` (episode returns and lengths)."""
-    import gymnasium as gym
+class TranslationOnly(gym.ActionWrapper):  # type: ignore[type-arg]
+    """The policy commands the pinch point's velocity, ``[dx, dy, dz]`` in ``[-1, 1]`` (the delta
+    action's first three components); the orientation is held (no turn) and the jaw closed.
+
+    Three dimensions instead of seven: a random turn of the wrist tilts the held peg out of line
+    with the bore, and exploring it is most of what a 7-D policy spends its steps on.
+    """
+
+    def __init__(self, env: gym.Env) -> None:  # type: ignore[type-arg]
+        super().__init__(env)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        full = np.zeros(7, dtype=np.float32)
+        full[:3] = action
+        full[6] = 1.0  # closed (ignored with fixed_jaw)
+        return full
+
+
+def make_env(*, actions: str = "translation", **kwargs: Any) -> Any:
+    """``gymnasium.make(ENV_ID, **kwargs)``, in :class:`TranslationOnly` if ``actions`` says so,
+    in SB3's ``Monitor`` (episode returns and lengths)."""
     from stable_baselines3.common.monitor import Monitor
 
     import peg_ctrl  # noqa: F401  (registers the environment)
 
-    return Monitor(gym.make(ENV_ID, **kwargs))
+    env = gym.make(ENV_ID, **kwargs)
+    return Monitor(TranslationOnly(env) if actions == "translation" else env)
 
 
 def _outcome(info: Mapping[str, Any], truncated: bool) -> str:
@@ -108,12 +146,17 @@ def _outcome(info: Mapping[str, Any], truncated: bool) -> str:
 
 
 def evaluate(
-    model: Any, env_kwargs: Mapping[str, Any], *, episodes: int, obs_rms: Any = None
+    model: Any,
+    env_kwargs: Mapping[str, Any],
+    *,
+    episodes: int,
+    obs_rms: Any = None,
+    actions: str = "translation",
 ) -> dict[str, Any]:
     """Success rate, mean return and length of ``model``'s deterministic policy over ``episodes``
     episodes with seeds ``EVAL_SEED0 + i``; ``obs_rms`` normalises the observations as in
     training (``VecNormalize.obs_rms``)."""
-    env = make_env(**env_kwargs)
+    env = make_env(actions=actions, **env_kwargs)
     returns, lengths, outcomes = [], [], Counter[str]()
     try:
         for i in range(episodes):
@@ -175,7 +218,11 @@ def _callback(settings: PPOSettings, curve: list[Evaluation], t0: float, bar: An
             venv = self.model.get_env()
             obs_rms = getattr(venv, "obs_rms", None)
             result = evaluate(
-                self.model, settings.env_kwargs(), episodes=settings.eval_episodes, obs_rms=obs_rms
+                self.model,
+                settings.env_kwargs(),
+                episodes=settings.eval_episodes,
+                obs_rms=obs_rms,
+                actions=settings.actions,
             )
             trained = self.train_outcomes
             curve.append(
@@ -208,9 +255,9 @@ def train(settings: PPOSettings, out: str | Path, *, show_progress: bool = True)
     out = prepare_output_dir(out)
     torch.set_num_threads(1)  # a small MLP: more threads only contend with the physics
     env_kwargs = settings.env_kwargs()
-    venv: Any = DummyVecEnv([lambda: make_env(**env_kwargs)])
+    venv: Any = DummyVecEnv([lambda: make_env(actions=settings.actions, **env_kwargs)])
     if settings.normalize:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=settings.normalize_reward)
     venv.seed(settings.seed)
     model = PPO(
         "MultiInputPolicy",
@@ -311,6 +358,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
     parser.add_argument("--eval-episodes", type=int, default=defaults.eval_episodes)
     parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--actions", choices=ACTION_SETS, default=defaults.actions)
+    parser.add_argument(
+        "--normalize-reward", action=argparse.BooleanOptionalAction, default=defaults.normalize_reward
+    )
     parser.add_argument("--out", default="runs/ppo")
     args = parser.parse_args(argv)
     try:
@@ -319,6 +370,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             eval_every=args.eval_every,
             eval_episodes=args.eval_episodes,
             seed=args.seed,
+            actions=args.actions,
+            normalize_reward=args.normalize_reward,
         )
         record = train(settings, args.out)
     except ConfigError as exc:

@@ -87,6 +87,7 @@ def test_human_mode_without_a_display_is_refused(monkeypatch: pytest.MonkeyPatch
         gym.make(ENV_ID, render_mode="human")
 
 
+@pytest.mark.slow  # ~25 s; docs/api.md's example (test_docs, default suite) steps a vector env
 def test_async_vector_env_steps_1000_times_with_random_actions() -> None:
     envs = gym.make_vec(ENV_ID, num_envs=4, vectorization_mode="async")
     try:

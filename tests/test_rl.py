@@ -74,3 +74,11 @@ def test_command_line_refuses_bad_settings_with_exit_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["python -m peg_ctrl.experiments.rl: error: timesteps must be a positive integer, got 0"]
     assert not (tmp_path / "x").exists()
+
+
+def test_translation_only_holds_the_orientation_and_the_jaw() -> None:
+    env = rl.TranslationOnly(rl.make_env(actions="full", **rl.ENV_KWARGS))
+    assert env.action_space.shape == (3,)
+    full = env.action(np.array([0.1, -0.2, -0.3], dtype=np.float32))
+    np.testing.assert_array_equal(full, np.array([0.1, -0.2, -0.3, 0, 0, 0, 1], dtype=np.float32))
+    env.close()

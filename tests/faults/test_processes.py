@@ -560,6 +560,7 @@ def _kill_resume_battery(tmp_path: Path, *, seeds: int, kills: int, seed: int) -
     )
 
 
+@pytest.mark.slow  # ~50 s; the default suite resumes an interrupted sweep in test_experiments
 @needs_proc
 def test_a_sweep_killed_twice_resumes_to_the_results_of_a_clean_run(tmp_path: Path) -> None:
     _kill_resume_battery(tmp_path, seeds=4, kills=2, seed=1)
