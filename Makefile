@@ -66,6 +66,7 @@ test-slow: $(STAMP)
 ## (and planners, experiments) from the top-level folders with an import hook that mypy cannot
 ## follow, so the package is built exactly as the wheel into $(TYPECHECK)/site and checked there
 ## (paths in mypy's messages are the installed ones: peg_ctrl/controllers/pd.py is controllers/pd.py).
+## lint-imports checks the layers (pyproject.toml [tool.importlinter], docs/architecture.md) there too.
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
@@ -76,6 +77,7 @@ lint: $(STAMP)
 	  || { cat $(TYPECHECK)/build.log; exit 1; }
 	cd $(TYPECHECK)/site && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml \
 	  --cache-dir $(CURDIR)/.mypy_cache
+	cd $(TYPECHECK)/site && $(CURDIR)/$(BIN)/lint-imports $(CURDIR)/pyproject.toml --no-cache --no-logo
 
 bench: $(STAMP)
 	$(BIN)/peg-sim bench --out $(OUT)/bench.json

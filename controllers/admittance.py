@@ -16,7 +16,7 @@ about the tip::
     commanded pose: turned by phi about the centre of the reference, then shifted by x;
     tracked by the ``pd`` controller.
 
-(:mod:`peg_ctrl.sensing` computes ``F_ext`` and ``tau_ext``.) Force-controlled axes
+(:mod:`peg_ctrl.sim.sensing` computes ``F_ext`` and ``tau_ext``.) Force-controlled axes
 (``target.force_axes``: flagged in ``target.wrench_axes`` or a non-zero ``target.force_world``
 entry) are regulated in closed loop with the sensor (an accommodation law): the command along the
 axis starts at the measured position when the axis becomes force-controlled and moves as
@@ -62,10 +62,10 @@ import numpy as np
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.sensing import WristModel, lowpass_alpha
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
+from peg_ctrl.sim.sensing import WristModel, lowpass_alpha
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["AdmittanceConfig", "AdmittanceController", "AdmittanceLoop"]
 
@@ -177,18 +177,35 @@ class AdmittanceLoop:
     def shape(self, state: ControlState, target: GripperTarget) -> GripperTarget:
         """The target shifted by the admittance, for the inner controller."""
         c = self.config
-        dt = self.dt
         v_ref = np.asarray(target.v_world)
-        accel_ref = np.zeros(3) if self._prev_v_ref is None else (v_ref - self._prev_v_ref) / dt
+        tau_ext = self._sense(state, v_ref)
+        self._translate(state, target)
+        angle = self._rotate_compliantly() if c.rotational else 0.0
+        total, turn_rate = self._turn(tau_ext, target)
+        if total is not None:
+            total = total + self.rotation if c.rotational else total
+            angle = float(np.linalg.norm(total))
+            rate = turn_rate + self.rotation_rate if c.rotational else turn_rate
+        else:
+            total, rate = self.rotation, self.rotation_rate
+        return self._command(target, v_ref, total, rate, angle)
+
+    def _sense(self, state: ControlState, v_ref: np.ndarray) -> np.ndarray:
+        """Tare (in the first ``tare_time``), filter the contact wrench; the unfiltered torque."""
+        accel_ref = np.zeros(3) if self._prev_v_ref is None else (v_ref - self._prev_v_ref) / self.dt
         self._prev_v_ref = v_ref.copy()
-        if state.t - self._t0 < c.tare_time:
+        if state.t - self._t0 < self.config.tare_time:
             self._tare(state, accel_ref)
         f_ext, tau_ext = self.external_wrench(state, accel_ref)
         a = self._alpha
         self.force_filtered += a * (f_ext - self.force_filtered)
         self.torque_filtered += a * (tau_ext - self.torque_filtered)
+        return tau_ext
 
-        # Translation: spring-damper to the reference, except along force-controlled axes.
+    def _translate(self, state: ControlState, target: GripperTarget) -> None:
+        """Translation: a spring-damper to the reference, except along force-controlled axes,
+        where a setpoint moves until the measured force is the commanded one."""
+        c, dt = self.config, self.dt
         f_cmd = np.asarray(target.force_world)
         axes = target.force_axes
         drive = _deadband(np.where(axes, 0.0, self.force_filtered), c.deadband)
@@ -201,7 +218,6 @@ class AdmittanceLoop:
         if n > c.max_offset:
             self.offset *= c.max_offset / n
             self.offset_rate[:] = 0.0
-        # Force-controlled axes: the setpoint moves until the measured force is the commanded one.
         entering = axes & ~self._force_axes
         start = target.p_world if self.bumpless else state.p_world
         self._setpoint[entering] = start[entering]
@@ -213,28 +229,26 @@ class AdmittanceLoop:
             self._setpoint_rate[axes] += acc_f[axes] * dt
             self._setpoint[axes] += self._setpoint_rate[axes] * dt
 
-        # Rotation about the centre of compliance.
-        angle = 0.0
-        if c.rotational:
-            drive_r = _deadband(self.torque_filtered, c.torque_deadband)
-            acc_r = (
-                drive_r - self._d_rot * self.rotation_rate - c.rot_stiffness * self.rotation
-            ) / c.rot_inertia
-            self.rotation_rate += acc_r * dt
-            self.rotation += self.rotation_rate * dt
-            angle = float(np.linalg.norm(self.rotation))
-            if angle > c.max_rotation:
-                self.rotation *= c.max_rotation / angle
-                self.rotation_rate[:] = 0.0
-                angle = c.max_rotation
-        total, turn_rate = self._turn(tau_ext, target)
-        if total is not None:
-            total = total + self.rotation if c.rotational else total
-            angle = float(np.linalg.norm(total))
-            rate = turn_rate + self.rotation_rate if c.rotational else turn_rate
-        else:
-            total, rate = self.rotation, self.rotation_rate
+    def _rotate_compliantly(self) -> float:
+        """Rotation about the centre of compliance: advance it; its angle [rad]."""
+        c, dt = self.config, self.dt
+        drive_r = _deadband(self.torque_filtered, c.torque_deadband)
+        acc_r = (drive_r - self._d_rot * self.rotation_rate - c.rot_stiffness * self.rotation) / c.rot_inertia
+        self.rotation_rate += acc_r * dt
+        self.rotation += self.rotation_rate * dt
+        angle = float(np.linalg.norm(self.rotation))
+        if angle > c.max_rotation:
+            self.rotation *= c.max_rotation / angle
+            self.rotation_rate[:] = 0.0
+            angle = c.max_rotation
+        return angle
 
+    def _command(
+        self, target: GripperTarget, v_ref: np.ndarray, total: np.ndarray, rate: np.ndarray, angle: float
+    ) -> GripperTarget:
+        """The reference moved by the offset, turned by ``total`` about the centre of compliance
+        (at ``rate``), with the setpoints on force-controlled axes."""
+        axes = target.force_axes
         p_ref, q_ref = np.asarray(target.p_world), np.asarray(target.quat_world)
         p_cmd = p_ref + self.offset
         q_cmd = q_ref

@@ -23,9 +23,9 @@ import numpy as np
 
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownComponent
-from peg_ctrl.jaw import JawCalibration, load_default
-from peg_ctrl.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration, load_default
+from peg_ctrl.sim.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
+from peg_ctrl.sim.state import ControlState
 from peg_ctrl.timing import control_decimation
 
 __all__ = [

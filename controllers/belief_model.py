@@ -1,6 +1,6 @@
 """A MuJoCo model of the world as the task believes it, for planning through contact.
 
-:func:`build_belief_model` makes a small model from a task's :class:`~peg_ctrl.belief.Belief`
+:func:`build_belief_model` makes a small model from a task's :class:`~peg_ctrl.sim.belief.Belief`
 (everything that is *believed*: where the hole is, its size, how the peg sits in the hand) and
 the hand's mass from the simulation's model (the controller's own robot):
 
@@ -30,9 +30,9 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.assets import AssetParams, block_parts
-from peg_ctrl.belief import Belief
-from peg_ctrl.rotations import rotate
+from peg_ctrl.sim.assets import AssetParams, block_parts
+from peg_ctrl.sim.belief import Belief
+from peg_ctrl.sim.rotations import rotate
 
 __all__ = ["BeliefModelSpec", "build_belief_model", "HAND_JOINTS"]
 

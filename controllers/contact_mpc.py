@@ -9,7 +9,7 @@ every solve::
                                        ahead, when the command s (the tip's position along the
                                        axis, or the turn about it) has moved by s_k - s_0
 
-``w_0`` is the measured wrench (:class:`~peg_ctrl.sensing.WristSensor`, tared); ``K`` the modelled
+``w_0`` is the measured wrench (:class:`~peg_ctrl.sim.sensing.WristSensor`, tared); ``K`` the modelled
 stiffness of the contact seen through the inner tracking loop (``contact_stiffness`` along the
 force axes — the inner MPC's own position stiffness, its LQR gain, by default — and
 ``contact_rot_stiffness`` about the moment axes). In units of force (``y_k = K (s_k - s_0)``) the
@@ -50,9 +50,9 @@ import scipy.sparse
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.sensing import WristSensor
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
+from peg_ctrl.sim.sensing import WristSensor
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["ContactQP", "ContactQPSolution", "ContactLoop", "ContactSettings"]
 

@@ -48,9 +48,9 @@ from peg_ctrl.controllers.base import (
     check_target,
 )
 from peg_ctrl.controllers.pd import PDConfig, PDController
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS, build_robot_spec
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.scene import BALL_JOINT, SLIDE_JOINTS, build_robot_spec
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["DiffIKConfig", "DiffIKController"]
 

@@ -1,6 +1,6 @@
 """Rigid-body dynamics of the base stack from Pinocchio, built from the scene's own MJCF.
 
-The robot-only MJCF (``peg_ctrl.scene.export_robot``: base stack + gripper, every inertial written
+The robot-only MJCF (``peg_ctrl.sim.scene.export_robot``: base stack + gripper, every inertial written
 explicitly) is written to a temporary directory, read with ``pinocchio.buildModelFromMJCF`` and
 deleted again; the finger joints are then locked at their open configuration
 (``buildReducedModel``), leaving the 6 base DoF: three slides and the ball joint. Pinocchio orders a
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.scene import PINCH_SITE, SceneConfig, export_robot
+from peg_ctrl.sim.scene import PINCH_SITE, SceneConfig, export_robot
 
 __all__ = ["BaseDynamics", "robot_mjcf", "to_pinocchio_q"]
 

@@ -39,10 +39,10 @@ import numpy as np
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort, InvalidField
 from peg_ctrl.controllers.dynamics import BaseDynamics
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import cross, rotate
-from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.rotations import cross, rotate
+from peg_ctrl.sim.scene import BALL_JOINT, SLIDE_JOINTS
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["ImpedanceConfig", "ImpedanceController"]
 

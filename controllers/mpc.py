@@ -70,12 +70,12 @@ from peg_ctrl.controllers.base import (
 )
 from peg_ctrl.controllers.contact_mpc import ContactLoop, ContactSettings
 from peg_ctrl.controllers.dynamics import BaseDynamics
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import rotate, rotate_inv
-from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.rotations import rotate, rotate_inv
+from peg_ctrl.sim.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
+from peg_ctrl.sim.state import ControlState
 
-__all__ = ["MPCConfig", "MPCController", "discretise", "lqr_gain"]
+__all__ = ["MPCConfig", "MPCController", "condense", "discretise", "lqr_gain"]
 
 _NAN3 = (math.nan, math.nan, math.nan)
 REACH = 0.01  # a force-controlled axis's reference lies this far beyond the gripper [m]
@@ -194,6 +194,42 @@ def lqr_gain(
     return k, p
 
 
+def _base_inertia(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """The base's six DoFs (three slides, the ball's three): their diagonal mass at the home
+    keyframe and their joint damping."""
+    slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
+    ball = model.joint(BALL_JOINT).dofadr[0]
+    dofs = [*slide_dofs, ball, ball + 1, ball + 2]
+    scratch = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, scratch, model.key(HOME_KEY).id)
+    mujoco.mj_forward(model, scratch)
+    full_m = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, scratch, full_m)
+    return np.array([full_m[d, d] for d in dofs]), model.dof_damping[dofs].copy()
+
+
+def condense(
+    a: np.ndarray, b: np.ndarray, q: np.ndarray, p_terminal: np.ndarray, r: np.ndarray, h: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The condensed prediction Z = Phi z0 + Gamma U (Z: stacked z_1..z_N, U: du_0..du_{N-1})
+    over ``h`` steps, and the QP's Hessian and linear map (g = lin @ z0):
+    (Phi, Gamma, Hessian, lin)."""
+    nx, nu = b.shape
+    phi = np.zeros((h * nx, nx))
+    gamma = np.zeros((h * nx, h * nu))
+    power = np.eye(nx)
+    for k in range(h):
+        power = a @ power
+        phi[k * nx : (k + 1) * nx] = power
+        for j in range(k + 1):
+            gamma[k * nx : (k + 1) * nx, j * nu : (j + 1) * nu] = np.linalg.matrix_power(a, k - j) @ b
+    q_bar = scipy.linalg.block_diag(*([q] * (h - 1) + [p_terminal]))
+    r_bar = scipy.linalg.block_diag(*([r] * h))
+    hess = 2.0 * (gamma.T @ q_bar @ gamma + r_bar)
+    hess = 0.5 * (hess + hess.T)
+    return phi, gamma, hess, 2.0 * gamma.T @ q_bar @ phi
+
+
 class MPCController(ControllerBase[MPCConfig]):
     """Condensed linear MPC at ``mpc_dt``, zero-order hold between. See the module docstring.
 
@@ -210,60 +246,57 @@ class MPCController(ControllerBase[MPCConfig]):
         *,
         jaw_calibration: JawCalibration | None = None,
     ) -> None:
-        import casadi as ca
-
         super().__init__(model, config or MPCConfig(), jaw_calibration=jaw_calibration)
         c = self.config
         self._every = check_multiple(c, "mpc_dt")
         self.dynamics = BaseDynamics()
-        slide_dofs = [model.joint(n).dofadr[0] for n in SLIDE_JOINTS]
-        ball = model.joint(BALL_JOINT).dofadr[0]
-        dofs = [*slide_dofs, ball, ball + 1, ball + 2]
-        scratch = mujoco.MjData(model)
-        mujoco.mj_resetDataKeyframe(model, scratch, model.key(HOME_KEY).id)
-        mujoco.mj_forward(model, scratch)
-        full_m = np.zeros((model.nv, model.nv))
-        mujoco.mj_fullM(model, scratch, full_m)
-        self.mass = np.array([full_m[d, d] for d in dofs])
-        self.damping = model.dof_damping[dofs].copy()
+        self.mass, self.damping = _base_inertia(model)
         self.u_max = np.concatenate([self._act.slide_limit, self._act.ball_limit])
         n, h = 6, c.horizon
-        # Per-DoF models, stacked block-diagonally: state [p_0, v_0, p_1, v_1, ...].
+        self.a, self.b, self.q, self.r = self._per_dof_models()
+        self.k_lqr, self.p_terminal = lqr_gain(self.a, self.b, self.q, self.r)
+        self._phi, self._gamma, self._hess, self._lin = condense(
+            self.a, self.b, self.q, self.p_terminal, self.r, h
+        )
+        # Velocity rows of the prediction: v_k = v_ref - z_v(k).
+        vel_rows = [k * 2 * n + 2 * i + 1 for k in range(h) for i in range(n)]
+        self._vel_rows = np.array(vel_rows)
+        self._a_con = self._gamma[self._vel_rows]
+        self._vel_limit = np.tile(np.array([c.v_max] * 3 + [c.omega_max] * 3), h)
+        self._make_solver()
+        self._u = np.zeros(n)
+        self._warm_x = np.zeros(h * n)
+        self._warm_lam_x = np.zeros(h * n)
+        self._warm_lam_a = np.zeros(len(vel_rows))
+        self._count = 0
+        self._err = np.zeros(3)
+        self._quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self.last_solve = Diagnostics()
+        with _quiet_stdout():  # ... or on its first solve
+            self.solve(np.zeros(12), np.zeros(6), np.zeros(6))
+        self.reset_warm_start()
+        self.contact = self._contact_loop(model) if c.formulation == "contact" else None
+        self._contact_every = check_multiple(c, "contact_dt") if c.contact_dt is not None else 1
+        self.solve_times: list[float] = []  # wall time of every QP solve [s]
+
+    def _per_dof_models(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per-DoF models (A, B, Q, R), stacked block-diagonally: state [p_0, v_0, p_1, v_1, ...]."""
+        c = self.config
         a_blocks, b_blocks, q_blocks, r_diag = [], [], [], []
-        for i in range(n):
+        for i in range(6):
             a_i, b_i = discretise(self.mass[i], self.damping[i], c.mpc_dt)
             a_blocks.append(a_i)
             b_blocks.append(-b_i)  # the error falls when the effort rises
             q_blocks.append(np.diag([c.q_pos, c.q_vel] if i < 3 else [c.q_rot, c.q_omega]))
             r_diag.append(c.r_force if i < 3 else c.r_torque)
-        self.a = scipy.linalg.block_diag(*a_blocks)
-        self.b = scipy.linalg.block_diag(*b_blocks)
-        self.q = scipy.linalg.block_diag(*q_blocks)
-        self.r = np.diag(r_diag)
-        self.k_lqr, self.p_terminal = lqr_gain(self.a, self.b, self.q, self.r)
-        # Condensed prediction Z = Phi z0 + Gamma U (Z: stacked z_1..z_N, U: du_0..du_{N-1}).
-        nx, nu = 2 * n, n
-        phi = np.zeros((h * nx, nx))
-        gamma = np.zeros((h * nx, h * nu))
-        power = np.eye(nx)
-        for k in range(h):
-            power = self.a @ power
-            phi[k * nx : (k + 1) * nx] = power
-            for j in range(k + 1):
-                gamma[k * nx : (k + 1) * nx, j * nu : (j + 1) * nu] = (
-                    np.linalg.matrix_power(self.a, k - j) @ self.b
-                )
-        q_bar = scipy.linalg.block_diag(*([self.q] * (h - 1) + [self.p_terminal]))
-        r_bar = scipy.linalg.block_diag(*([self.r] * h))
-        self._phi, self._gamma = phi, gamma
-        self._hess = 2.0 * (gamma.T @ q_bar @ gamma + r_bar)
-        self._hess = 0.5 * (self._hess + self._hess.T)
-        self._lin = 2.0 * gamma.T @ q_bar @ phi  # g = lin @ z0
-        # Velocity rows of the prediction: v_k = v_ref - z_v(k).
-        vel_rows = [k * nx + 2 * i + 1 for k in range(h) for i in range(n)]
-        self._vel_rows = np.array(vel_rows)
-        self._a_con = gamma[self._vel_rows]
-        self._vel_limit = np.tile(np.array([c.v_max] * 3 + [c.omega_max] * 3), h)
+        block = scipy.linalg.block_diag
+        return block(*a_blocks), block(*b_blocks), block(*q_blocks), np.diag(r_diag)
+
+    def _make_solver(self) -> None:
+        """CasADi's conic solver for the QP's sparsity (qpOASES or OSQP)."""
+        import casadi as ca
+
+        c = self.config
         options = (
             {"printLevel": "none"}
             if c.solver == "qpoases"
@@ -278,20 +311,6 @@ class MPCController(ControllerBase[MPCConfig]):
             )
         self._hess_dm = ca.DM(self._hess)
         self._a_dm = ca.DM(self._a_con)
-        self._u = np.zeros(n)
-        self._warm_x = np.zeros(h * nu)
-        self._warm_lam_x = np.zeros(h * nu)
-        self._warm_lam_a = np.zeros(len(vel_rows))
-        self._count = 0
-        self._err = np.zeros(3)
-        self._quat = np.array([1.0, 0.0, 0.0, 0.0])
-        self.last_solve = Diagnostics()
-        with _quiet_stdout():  # ... or on its first solve
-            self.solve(np.zeros(12), np.zeros(6), np.zeros(6))
-        self.reset_warm_start()
-        self.contact = self._contact_loop(model) if c.formulation == "contact" else None
-        self._contact_every = check_multiple(c, "contact_dt") if c.contact_dt is not None else 1
-        self.solve_times: list[float] = []  # wall time of every QP solve [s]
 
     def _contact_loop(self, model: mujoco.MjModel) -> ContactLoop:
         c = self.config

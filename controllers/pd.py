@@ -37,9 +37,9 @@ import mujoco
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["PDConfig", "PDController"]
 
@@ -109,19 +109,20 @@ class PDController(ControllerBase[PDConfig]):
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
         # Scalar Python on purpose: at 1 kHz, numpy's per-call overhead on 3-vectors would cost
         # more than the physics step it controls (see `peg-sim bench`).
+        return Effort(self._slide_force(state, target), self._ball_torque(state, target))
+
+    def _slide_force(self, state: ControlState, target: GripperTarget) -> tuple[float, float, float]:
+        """The slides: a saturated PD on position (plus the commanded force on force-controlled
+        axes, whose position error is ignored) and, with the model feedforward, damping and weight."""
         cfg = self.config
-        ff = cfg.model_feedforward
         px, py, pz = state.p_world.tolist()
         vx, vy, vz = state.v_world.tolist()
         tx, ty, tz = target.p_world.tolist()
         tvx, tvy, tvz = target.v_world.tolist()
-
-        # Slides.
         kp, kd = cfg.kp_pos, cfg.kd_pos
         ex, ey, ez = kp * (tx - px), kp * (ty - py), kp * (tz - pz)
         fdx = fdy = fdz = 0.0
-        wrench = target.force_controlled
-        if wrench:  # the position error along a force-controlled axis is ignored
+        if target.force_controlled:  # the position error along a force-controlled axis is ignored
             fdx, fdy, fdz = target.force_world.tolist()
             free_x, free_y, free_z = target.force_axes.tolist()
             ex, ey, ez = (0.0 if free_x else ex), (0.0 if free_y else ey), (0.0 if free_z else ez)
@@ -133,30 +134,22 @@ class PDController(ControllerBase[PDConfig]):
         fx = ex + kd * (tvx - vx)
         fy = ey + kd * (tvy - vy)
         fz = ez + kd * (tvz - vz)
-        if ff:
+        if cfg.model_feedforward:
             bx, by, bz = self._b_slide
             gx, gy, gz = self._weight
             fx += bx * tvx - gx
             fy += by * tvy - gy
             fz += bz * tvz - gz
+        return fx, fy, fz
 
-        # Ball joint: theta = Log(q^-1 q_d), in the gripper frame.
+    def _ball_torque(self, state: ControlState, target: GripperTarget) -> tuple[float, float, float]:
+        """The ball joint: a rate command from the orientation error theta = Log(q^-1 q_d) in the
+        gripper frame, saturated, tracked by a filtered rate loop (plus feedforward and, on
+        moment-controlled axes, the commanded moment open loop)."""
+        cfg = self.config
         qw, qx, qy, qz = state.quat_world.tolist()
-        dw, dx, dy, dz = target.quat_world.tolist()
-        ew = qw * dw + qx * dx + qy * dy + qz * dz
-        ex = qw * dx - qx * dw - qy * dz + qz * dy
-        ey = qw * dy + qx * dz - qy * dw - qz * dx
-        ez = qw * dz - qx * dy + qy * dx - qz * dw
-        sin_half = math.sqrt(ex * ex + ey * ey + ez * ez)
-        if not sin_half <= 1e-12:  # written so that a NaN takes this branch and propagates
-            angle = 2.0 * math.atan2(sin_half, ew)
-            if angle > math.pi:  # short way round
-                angle -= 2.0 * math.pi
-            k = angle / sin_half
-            thx, thy, thz = k * ex, k * ey, k * ez
-        else:
-            thx = thy = thz = 0.0
-        moments = wrench and bool(target.moment_axes.any())
+        thx, thy, thz = _rotation_error(qw, qx, qy, qz, *target.quat_world.tolist())
+        moments = target.force_controlled and bool(target.moment_axes.any())
         if moments:  # no orientation error about the moment-controlled world axes
             thx, thy, thz = _drop_world_axes(qw, qx, qy, qz, (thx, thy, thz), target.moment_axes.tolist())
         fwx, fwy, fwz = target.omega_body.tolist()
@@ -174,7 +167,7 @@ class PDController(ControllerBase[PDConfig]):
         of[2] += a * (mz - of[2])
         kw = cfg.k_omega
         tqx, tqy, tqz = kw * (wx - of[0]), kw * (wy - of[1]), kw * (wz - of[2])
-        if ff:
+        if cfg.model_feedforward:
             bx, by, bz = self._b_ball
             gtx, gty, gtz = self._gravity_torque(qw, qx, qy, qz)
             tqx += bx * wx + gtx
@@ -185,7 +178,7 @@ class PDController(ControllerBase[PDConfig]):
             mx_, my_, mz_ = (t if on else 0.0 for t, on in zip(torques, axes, strict=True))
             cx_, cy_, cz_ = _rotate(qw, -qx, -qy, -qz, mx_, my_, mz_)
             tqx, tqy, tqz = tqx + cx_, tqy + cy_, tqz + cz_
-        return Effort((fx, fy, fz), (tqx, tqy, tqz))
+        return tqx, tqy, tqz
 
     def _gravity_torque(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
         """Body-frame torque that cancels the gripper's weight about the pivot [N m].
@@ -197,6 +190,25 @@ class PDController(ControllerBase[PDConfig]):
         bx, by, bz = _rotate(qw, -qx, -qy, -qz, gx, gy, gz)
         cx, cy, cz = self._com_body
         return (-(cy * bz - cz * by), -(cz * bx - cx * bz), -(cx * by - cy * bx))
+
+
+def _rotation_error(
+    qw: float, qx: float, qy: float, qz: float, dw: float, dx: float, dy: float, dz: float
+) -> tuple[float, float, float]:
+    """theta = Log(q^-1 q_d): the rotation vector from ``q`` to ``d`` in ``q``'s frame, the
+    short way round [rad]; NaN in gives NaN out."""
+    ew = qw * dw + qx * dx + qy * dy + qz * dz
+    ex = qw * dx - qx * dw - qy * dz + qz * dy
+    ey = qw * dy + qx * dz - qy * dw - qz * dx
+    ez = qw * dz - qx * dy + qy * dx - qz * dw
+    sin_half = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if not sin_half <= 1e-12:  # written so that a NaN takes this branch and propagates
+        angle = 2.0 * math.atan2(sin_half, ew)
+        if angle > math.pi:  # short way round
+            angle -= 2.0 * math.pi
+        k = angle / sin_half
+        return k * ex, k * ey, k * ez
+    return 0.0, 0.0, 0.0
 
 
 def _drop_world_axes(

@@ -63,7 +63,6 @@ import mujoco.rollout
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.belief import Belief
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import (
     ControllerBase,
@@ -76,11 +75,12 @@ from peg_ctrl.controllers.base import (
 )
 from peg_ctrl.controllers.belief_model import BeliefModelSpec, build_belief_model
 from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.scene import BALL_JOINT, SLIDE_JOINTS
-from peg_ctrl.sensing import WristSensor
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.belief import Belief
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
+from peg_ctrl.sim.scene import BALL_JOINT, SLIDE_JOINTS
+from peg_ctrl.sim.sensing import WristSensor
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["SamplingMPCConfig", "SamplingMPCController", "METHODS"]
 
@@ -266,7 +266,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
 
     # -- belief ----------------------------------------------------------------------------------
     def observe_belief(self, belief: object) -> None:
-        """Rebuild the belief model for the task's new belief (see :mod:`peg_ctrl.belief`;
+        """Rebuild the belief model for the task's new belief (see :mod:`peg_ctrl.sim.belief`;
         None: the task states none, and the model is the hand alone)."""
         self._belief = belief if isinstance(belief, Belief) else None
         self._belief_model = None  # built at the next control step, at the present orientation

@@ -34,18 +34,18 @@ import json
 from pathlib import Path
 from typing import Any
 
-from peg_ctrl.assets import AssetParams
 from peg_ctrl.config import ConfigError, apply_overrides, load, read_mapping, to_dict
 from peg_ctrl.controllers.base import ControllerConfig
-from peg_ctrl.episode import (
+from peg_ctrl.planners import PLANNERS
+from peg_ctrl.run.episode import (
     DomainConfig,
     EpisodeConfig,
     RandomizationConfig,
     episode_config_from_mapping,
 )
-from peg_ctrl.physics import PhysicsConfig
-from peg_ctrl.planners import PLANNERS
-from peg_ctrl.scene import SceneConfig
+from peg_ctrl.sim.assets import AssetParams
+from peg_ctrl.sim.physics import PhysicsConfig
+from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import TaskSpec
 from peg_ctrl.tasks.held_insertion import STRATEGIES
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig

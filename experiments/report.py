@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from peg_ctrl.episode import COST_FIELDS
 from peg_ctrl.experiments.stats import ALPHA, compare_arms, episodes_frame, median_ci, wilson_interval
 from peg_ctrl.io import atomic_write_text
-from peg_ctrl.monitors import FIRST_CONTACT_N
-from peg_ctrl.plots import pyplot, save_figure
+from peg_ctrl.run.episode import COST_FIELDS
+from peg_ctrl.run.plots import pyplot, save_figure
+from peg_ctrl.tasks.monitors import FIRST_CONTACT_N
 
 __all__ = [
     "wilson_interval",
@@ -712,6 +712,38 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         if (out_dir / "experiment.json").is_file()
         else {}
     )
+    parts = [
+        *_header_section(exp, out_dir.name, rows, elapsed_s),
+        *_summary_section(summary),
+        *_cell_section(rows),
+        *_comparison_section(rows),
+        *_cost_section(rows),
+        *_plots_section(rows, plots),
+    ]
+    path = out_dir / "report.md"
+    atomic_write_text(path, "\n".join(parts))
+    return path
+
+
+def _header_section(
+    exp: dict[str, Any], default_name: str, rows: list[dict[str, Any]], elapsed_s: float | None
+) -> list[str]:
+    """The title and one line of what was run."""
+    clearances = ", ".join(f"{c * 1e3:g} mm" for c in exp.get("clearances", []))
+    return [
+        f"# Experiment report: {exp.get('name', default_name)}",
+        "",
+        f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
+        f"planners {', '.join(exp.get('planners', []))}; clearances "
+        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
+        f"`{exp.get('physics', {}).get('profile', 'seed')}`."
+        + (f" Run time {elapsed_s:.0f} s." if elapsed_s is not None else ""),
+        "",
+    ]
+
+
+def _summary_section(summary: list[dict[str, Any]]) -> list[str]:
+    """Success, peak force, time to insert and failures per arm, planner and clearance."""
     for s in summary:
         s["success"] = f"{s['successes']}/{s['episodes']} ({100 * s['success_rate']:.0f} %)"
         s["ci"] = f"[{100 * s['success_ci95_low']:.0f}, {100 * s['success_ci95_high']:.0f}] %"
@@ -722,41 +754,27 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         s["time_ci"] = _interval(
             s["time_to_insert_median_ci95_low_s"], s["time_to_insert_median_ci95_high_s"], "{:.2f}"
         )
-    clearances = ", ".join(f"{c * 1e3:g} mm" for c in exp.get("clearances", []))
-    parts = [
-        f"# Experiment report: {exp.get('name', out_dir.name)}",
-        "",
-        f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
-        f"planners {', '.join(exp.get('planners', []))}; clearances "
-        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
-        f"`{exp.get('physics', {}).get('profile', 'seed')}`."
-        + (f" Run time {elapsed_s:.0f} s." if elapsed_s is not None else ""),
-        "",
-        "## Summary",
-        "",
-        _table(
-            summary,
-            [
-                ("controller", "arm"),
-                ("planner", "planner"),
-                ("clearance_mm", "clearance [mm]"),
-                ("success", "success"),
-                ("ci", "95 % CI"),
-                ("peak_force_median_n", "peak force median [N]"),
-                ("force_ci", "95 % CI"),
-                ("peak_force_p95_n", "peak force p95 [N]"),
-                ("time_to_insert_median_s", "time to insert [s]"),
-                ("time_ci", "95 % CI"),
-                ("contact_to_seat_median_s", "contact to seated [s]"),
-                ("impulse_median_ns", "impulse median [N s]"),
-                ("failure_reasons", "failures"),
-            ],
-        ),
-        "",
-        *_cell_section(rows),
-        *_comparison_section(rows),
-        *_cost_section(rows),
+    columns = [
+        ("controller", "arm"),
+        ("planner", "planner"),
+        ("clearance_mm", "clearance [mm]"),
+        ("success", "success"),
+        ("ci", "95 % CI"),
+        ("peak_force_median_n", "peak force median [N]"),
+        ("force_ci", "95 % CI"),
+        ("peak_force_p95_n", "peak force p95 [N]"),
+        ("time_to_insert_median_s", "time to insert [s]"),
+        ("time_ci", "95 % CI"),
+        ("contact_to_seat_median_s", "contact to seated [s]"),
+        ("impulse_median_ns", "impulse median [N s]"),
+        ("failure_reasons", "failures"),
     ]
+    return ["## Summary", "", _table(summary, columns), ""]
+
+
+def _plots_section(rows: list[dict[str, Any]], plots: list[tuple[str, str]]) -> list[str]:
+    """Each plot with its caption (or why the force plots are missing)."""
+    parts: list[str] = []
     if rows and "force_profiles.png" not in {name for _, name in plots}:
         parts += [
             "The episodes' force traces (`episodes/<key>/forces.npz`) are not in this directory, so "
@@ -765,6 +783,4 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         ]
     for title, name in plots:
         parts += [f"## {title}", "", _CAPTIONS.get(name, ""), "", f"![{title}]({name})", ""]
-    path = out_dir / "report.md"
-    atomic_write_text(path, "\n".join(parts))
-    return path
+    return parts

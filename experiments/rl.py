@@ -35,7 +35,7 @@ import numpy as np
 from gymnasium import spaces
 
 from peg_ctrl.config import ConfigError
-from peg_ctrl.gym_env import ENV_ID
+from peg_ctrl.gym.env import ENV_ID
 from peg_ctrl.io import atomic_write_text, prepare_output_dir, to_json
 from peg_ctrl.progress import progress_bar
 
@@ -327,7 +327,7 @@ def _write_curve(path: Path, curve: Sequence[Evaluation]) -> None:
 def plot_curve(curve: Sequence[Evaluation], path: Path, *, title: str = "") -> Path:
     """Success rate (evaluation and training episodes) and mean evaluation return against
     training steps."""
-    from peg_ctrl.plots import pyplot, save_figure
+    from peg_ctrl.run.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, (ax_s, ax_r) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

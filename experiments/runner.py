@@ -27,11 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import to_dict
-from peg_ctrl.episode import COST_FIELDS
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
 from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_stale_temps, to_json
-from peg_ctrl.workers import worker_pool
+from peg_ctrl.run.episode import COST_FIELDS
+from peg_ctrl.run.workers import worker_pool
 
 __all__ = ["run_sweep", "collect_rows", "refresh_tables", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
 
@@ -84,7 +84,7 @@ EPISODE_COLUMNS = (
 
 def _run_one(args: tuple[str, dict[str, Any], str]) -> dict[str, Any]:
     """Worker: one episode (the compiled model is cached per worker and scene)."""
-    from peg_ctrl.episode import run_episode
+    from peg_ctrl.run.episode import run_episode
 
     key, data, out = args
     result = run_episode(job_config(data), Path(out), plot=False).to_dict()
@@ -95,7 +95,7 @@ def _run_one(args: tuple[str, dict[str, Any], str]) -> dict[str, Any]:
 def _warm_up(scene_data: dict[str, Any]) -> float:
     """Worker: import everything and compile the scene once; returns the time it took [s]."""
     t0 = time.perf_counter()
-    from peg_ctrl.episode import compiled_model, episode_config_from_mapping
+    from peg_ctrl.run.episode import compiled_model, episode_config_from_mapping
 
     cfg = episode_config_from_mapping(scene_data)
     compiled_model(cfg.scene, cfg.physics.profile)
@@ -156,7 +156,7 @@ _Stream = Generator[dict[str, Any], None, None]
 
 def _local_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int) -> _Stream:
     # Closing this generator early (Ctrl-C, an error) ends the workers and starts no queued
-    # episode; they also die with this process (peg_ctrl.workers).
+    # episode; they also die with this process (peg_ctrl.run.workers).
     if not tasks:
         return
     with worker_pool(min(workers, len(tasks))) as pool:
@@ -275,7 +275,7 @@ def _sweep(
 
 def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
     """One row per finished episode, in job order, from the episodes' ``summary.json``."""
-    from peg_ctrl.episode import domain_draw
+    from peg_ctrl.run.episode import domain_draw
 
     rows = []
     for job in jobs:

@@ -1,7 +1,7 @@
 """peg_ctrl: a physics-faithful peg-in-hole simulator in MuJoCo and a controller research framework.
 
 Importing the package registers the Gymnasium environment ``peg_ctrl/PegInsertion-v0``
-(:mod:`peg_ctrl.gym_env`, imported only when the environment is made).
+(:mod:`peg_ctrl.gym.env`, imported only when the environment is made).
 """
 
 import os as _os
@@ -35,10 +35,65 @@ def _choose_gl_backend() -> None:
 
 _choose_gl_backend()
 
+import importlib as _importlib  # noqa: E402
+import importlib.abc as _importlib_abc  # noqa: E402
+import importlib.util as _importlib_util  # noqa: E402
+import sys as _sys  # noqa: E402
+import warnings as _warnings  # noqa: E402
+from importlib.machinery import ModuleSpec as _ModuleSpec  # noqa: E402
+from types import ModuleType as _ModuleType  # noqa: E402
+
 from gymnasium.envs.registration import register as _register  # noqa: E402
 from gymnasium.envs.registration import registry as _registry  # noqa: E402
 
 __version__ = "0.1.0"
 
+# Modules that moved into the layered subpackages (docs/architecture.md) in 0.2. The old names
+# still import, as the same module object, with a DeprecationWarning naming the new one.
+_MOVED = {
+    **{m: f"sim.{m}" for m in ("assets", "belief", "grasp_start", "jaw", "menagerie", "physics")},
+    **{m: f"sim.{m}" for m in ("rotations", "scene", "sensing", "state", "validity")},
+    **{m: f"run.{m}" for m in ("batch", "episode", "episode_log", "loop", "plots", "recorders")},
+    **{m: f"run.{m}" for m in ("tracker", "workers")},
+    **{m: f"tools.{m}" for m in ("bench", "profile_check", "replay", "validity_report")},
+    "monitors": "tasks.monitors",
+    "gym_env": "gym.env",
+    "teleop_window": "cli.teleop_window",
+}
+
+
+class _MovedModules(_importlib_abc.MetaPathFinder, _importlib_abc.Loader):
+    """``import peg_ctrl.episode`` gives :mod:`peg_ctrl.run.episode` itself (not a copy: one
+    set of classes and globals), and warns where the import was written."""
+
+    def __init__(self) -> None:
+        self._own_specs: dict[str, _ModuleSpec | None] = {}
+
+    def find_spec(self, fullname: str, path: object = None, target: object = None) -> _ModuleSpec | None:
+        old = fullname.removeprefix(f"{__name__}.")
+        if old == fullname or old not in _MOVED:
+            return None
+        return _importlib_util.spec_from_loader(fullname, self)
+
+    def create_module(self, spec: _ModuleSpec) -> _ModuleType:
+        new = f"{__name__}.{_MOVED[spec.name.removeprefix(__name__ + '.')]}"
+        # stacklevel 2: the import statement (warnings skips the import system's own frames)
+        _warnings.warn(
+            f"{spec.name} moved to {new}; import it from there (the old name goes in 0.3)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        module = _importlib.import_module(new)
+        self._own_specs[new] = module.__spec__
+        return module
+
+    def exec_module(self, module: _ModuleType) -> None:
+        # the import system stamped the alias's spec on the module: give it back its own
+        module.__spec__ = self._own_specs.pop(module.__name__)
+
+
+if not any(isinstance(finder, _MovedModules) for finder in _sys.meta_path):
+    _sys.meta_path.insert(0, _MovedModules())  # first: before any finder that sees stale files
+
 if "peg_ctrl/PegInsertion-v0" not in _registry:
-    _register(id="peg_ctrl/PegInsertion-v0", entry_point="peg_ctrl.gym_env:PegInsertionEnv")
+    _register(id="peg_ctrl/PegInsertion-v0", entry_point="peg_ctrl.gym.env:PegInsertionEnv")

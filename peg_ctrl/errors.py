@@ -1,7 +1,7 @@
 """The exceptions peg_ctrl raises, under one root.
 
 ``PegCtrlError`` is the root. Its subclasses say *whose* problem it is, so that a command-line
-front end can map them to exit codes in one place (see :mod:`peg_ctrl.cli`):
+front end can map them to exit codes in one place (see :mod:`peg_ctrl.cli.app`):
 
 - user input: :class:`ConfigError` (a bad configuration value or argument; the message names
   the field), :class:`UnknownComponent` (a name not in a registry; the message lists the known

@@ -8,7 +8,7 @@ Every file the project writes is complete or absent: it is written to a temporar
 same directory (``.<name>.<random>.tmp...``) and renamed over its target
 (:func:`atomic_write_bytes`, :func:`atomic_write_text`, and :func:`atomic_path` for libraries
 that write to a path themselves), or, for a stream, appended in whole records
-(:class:`~peg_ctrl.episode_log.EpisodeLogger`). Every JSON document or record is strict
+(:class:`~peg_ctrl.run.episode_log.EpisodeLogger`). Every JSON document or record is strict
 (RFC 8259) JSON, made by :func:`to_json`: no ``NaN`` or ``Infinity``.
 """
 
@@ -300,7 +300,7 @@ def lock_output_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     An exclusive advisory ``fcntl.flock`` on ``path/.peg_ctrl.lock``, which holds the owner's pid
     for the message. The kernel releases it when the process ends, however it ends: a sweep
     killed with ``SIGKILL`` can be resumed at once. It is not passed to worker processes; they
-    end with their parent (:mod:`peg_ctrl.workers`). The file is left in place, as unlinking a
+    end with their parent (:mod:`peg_ctrl.run.workers`). The file is left in place, as unlinking a
     lock file races with a process about to take it. Where there is no ``flock`` (Windows),
     nothing is locked.
 

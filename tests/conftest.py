@@ -23,8 +23,8 @@ import pytest  # noqa: E402
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers import make_controller
-from peg_ctrl.scene import build_model
-from peg_ctrl.tracker import Tracker
+from peg_ctrl.sim.scene import build_model
+from peg_ctrl.run.tracker import Tracker
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 HOME = np.array([-0.2, 0.0, 0.2])

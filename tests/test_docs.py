@@ -60,8 +60,8 @@ def _contact_hard_row(key: str) -> dict[str, str]:
 
 def test_the_held_insertion_config_is_a_contact_hard_episode() -> None:
     from peg_ctrl.config import read_mapping
-    from peg_ctrl.episode import episode_config_from_mapping
     from peg_ctrl.experiments.config import expand, load_experiment
+    from peg_ctrl.run.episode import episode_config_from_mapping
 
     cfg = episode_config_from_mapping(read_mapping(HELD_INSERTION))
     (job,) = [
@@ -85,7 +85,7 @@ def test_the_held_insertion_config_is_a_contact_hard_episode() -> None:
 def test_the_held_insertion_config_reproduces_its_sweep_episode(tmp_path: Path) -> None:
     import json
 
-    from peg_ctrl.episode import WALL_CLOCK_FIELDS
+    from peg_ctrl.run.episode import WALL_CLOCK_FIELDS
 
     from .conftest import peg_sim
 

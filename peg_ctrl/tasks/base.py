@@ -17,12 +17,12 @@ import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import UnknownComponent
-from peg_ctrl.state import ControlState, PegObservation
+from peg_ctrl.sim.state import ControlState, PegObservation
 
 if TYPE_CHECKING:
-    from peg_ctrl.jaw import JawCalibration
     from peg_ctrl.planners.base import MotionLimits, Planner
-    from peg_ctrl.scene import SceneConfig
+    from peg_ctrl.sim.jaw import JawCalibration
+    from peg_ctrl.sim.scene import SceneConfig
 
 __all__ = [
     "Observation",
@@ -53,7 +53,7 @@ class Evaluation(NamedTuple):
     ``done`` ends the episode; ``success`` says how; ``reason`` (one of
     :data:`~peg_ctrl.errors.FAILURE_REASONS`, empty on success) and ``detail`` explain a failure;
     ``metrics`` holds the task's named measurements (a NamedTuple, e.g. an
-    :class:`~peg_ctrl.monitors.InsertionMeasure`).
+    :class:`~peg_ctrl.tasks.monitors.InsertionMeasure`).
     """
 
     done: bool

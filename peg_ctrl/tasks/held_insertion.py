@@ -81,11 +81,18 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from peg_ctrl.belief import Belief
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
-from peg_ctrl.monitors import (
+from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
+from peg_ctrl.sim.belief import Belief
+from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
+from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
+from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.sim.sensing import WristSensor
+from peg_ctrl.sim.state import ft_world
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.hop_search import GUIDE_AXES, HexLattice, Hold, HopSearch, HopSettings
+from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
     InsertionMeasure,
     InsertionMonitor,
@@ -94,14 +101,15 @@ from peg_ctrl.monitors import (
     classify_end_state,
     not_at_hole_detail,
 )
-from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
-from peg_ctrl.rotations import quat_mul, rotate, rotate_inv, yaw_quat
-from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.sensing import WristSensor
-from peg_ctrl.state import ft_world
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
-from peg_ctrl.tasks.hop_search import GUIDE_AXES, HexLattice, Hold, HopSearch, HopSettings
-from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
+from peg_ctrl.tasks.phases import (
+    DONE,
+    Motion,
+    PhaseMachine,
+    PhaseSpec,
+    PlannedMoves,
+    Timeout,
+    TrajectorySequence,
+)
 from peg_ctrl.tasks.pick_and_place import SuccessConfig
 
 __all__ = ["STRATEGIES", "PHASES", "HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
@@ -292,7 +300,7 @@ class _ContactSense:
         self.force += self.alpha * (contact - self.force)
 
 
-class HeldInsertionTask:
+class HeldInsertionTask(PlannedMoves):
     """Phases of one insertion strategy for a held peg; evaluates the insertion."""
 
     name = "held_insertion"
@@ -573,11 +581,6 @@ class HeldInsertionTask:
         return bottom - rotate(q_grip, self._b_body)
 
     # -- motions ------------------------------------------------------------------------------
-    def _move(self, goal: Waypoint, limits: MotionLimits | None = None) -> Motion:
-        trajectory = self.planner.plan(self._goal, goal, limits or self.limits)
-        self._goal = goal
-        return trajectory
-
     def _slow(self) -> MotionLimits:
         return self.limits.scaled(self.cfg.descent_speed / self.limits.v_lin)
 

@@ -13,10 +13,10 @@ import dataclasses
 from collections.abc import Callable, Mapping
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.planners.base import Trajectory
+from peg_ctrl.planners.base import MotionLimits, Planner, Trajectory, Waypoint
 from peg_ctrl.tasks.base import Observation, PhaseRecord, close_open_record
 
-__all__ = ["DONE", "Motion", "Timeout", "PhaseSpec", "PhaseMachine", "TrajectorySequence"]
+__all__ = ["DONE", "Motion", "PlannedMoves", "Timeout", "PhaseSpec", "PhaseMachine", "TrajectorySequence"]
 
 DONE = "done"
 
@@ -37,6 +37,21 @@ class TrajectorySequence:
 
 
 Motion = Trajectory | TrajectorySequence  # what a phase plays
+
+
+class PlannedMoves:
+    """A task's moves from goal to goal: each planned from the last goal (not from where the
+    gripper is), with the task's motion limits unless others are given."""
+
+    planner: Planner
+    limits: MotionLimits
+    _goal: Waypoint
+
+    def _move(self, goal: Waypoint, limits: MotionLimits | None = None) -> Motion:
+        """Plan from the last goal to ``goal``, which becomes the last goal."""
+        trajectory = self.planner.plan(self._goal, goal, limits or self.limits)
+        self._goal = goal
+        return trajectory
 
 
 @dataclasses.dataclass(frozen=True)

@@ -33,7 +33,7 @@ Success
 
 Failure
     At the hole, when the machine finished without success: ``missed`` (the peg never entered the
-    bore), ``jammed`` or ``wedged`` (stuck in it; :func:`~peg_ctrl.monitors.classify_end_state`),
+    bore), ``jammed`` or ``wedged`` (stuck in it; :func:`~peg_ctrl.tasks.monitors.classify_end_state`),
     the detail giving its lateral error, tilt and depth now and when it was released;
     ``excessive_tilt`` (the peg lies tilted at the end); ``timeout`` otherwise (not at the hole,
     or deep enough but off the axis); ``grasp_lost`` (closed on nothing). The loop's monitors
@@ -52,8 +52,12 @@ from numpy.typing import NDArray
 
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import ConfigError, EpisodeFailure
-from peg_ctrl.jaw import JawCalibration
-from peg_ctrl.monitors import (
+from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
+from peg_ctrl.sim.jaw import JawCalibration
+from peg_ctrl.sim.rotations import quat_mul, rotate_inv, yaw_quat
+from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.monitors import (
     InsertionMeasure,
     InsertionMonitor,
     SeatedCriterion,
@@ -61,11 +65,15 @@ from peg_ctrl.monitors import (
     classify_end_state,
     not_at_hole_detail,
 )
-from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
-from peg_ctrl.rotations import quat_mul, rotate_inv, yaw_quat
-from peg_ctrl.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
-from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, Timeout, TrajectorySequence
+from peg_ctrl.tasks.phases import (
+    DONE,
+    Motion,
+    PhaseMachine,
+    PhaseSpec,
+    PlannedMoves,
+    Timeout,
+    TrajectorySequence,
+)
 
 __all__ = [
     "PHASES",
@@ -190,7 +198,7 @@ def initial_qpos(
     return qpos
 
 
-class PickAndPlaceTask:
+class PickAndPlaceTask(PlannedMoves):
     """Turns observations into gripper targets, phase by phase; evaluates the insertion."""
 
     name = "pick_and_place"
@@ -348,12 +356,6 @@ class PickAndPlaceTask:
         self.machine.close_record(t, outcome)
 
     # -- motions ------------------------------------------------------------------------------
-    def _move(self, goal: Waypoint, limits: MotionLimits | None = None) -> Motion:
-        """Plan from the last goal to ``goal``, which becomes the last goal."""
-        trajectory = self.planner.plan(self._goal, goal, limits or self.limits)
-        self._goal = goal
-        return trajectory
-
     def _enter_approach(self, obs: Observation) -> Motion:
         p = obs.peg.p_world
         above = (p[0], p[1], p[2] + self.cfg.approach_height)

@@ -4,7 +4,7 @@
 - :mod:`~peg_ctrl.teleop.task` — teleoperation as a task on the one loop;
 - :mod:`~peg_ctrl.teleop.session` — the session: loop, resets, logs, summary;
 - :mod:`~peg_ctrl.teleop.scripted` — a headless operator for tests and demos.
-The window lives in :mod:`peg_ctrl.teleop_window`.
+The window lives in :mod:`peg_ctrl.cli.teleop_window`.
 """
 
 from peg_ctrl.teleop.mapper import (

@@ -2,7 +2,7 @@
 
 The session is driven by :meth:`TeleopSession.advance` (simulated seconds) from a window or a
 script (:class:`~peg_ctrl.teleop.scripted.ScriptedOperator`). It writes what ``peg-sim run``
-writes: ``summary.json`` (every field of :class:`~peg_ctrl.episode.EpisodeResult`, plus the
+writes: ``summary.json`` (every field of :class:`~peg_ctrl.run.episode.EpisodeResult`, plus the
 session's own), ``config.json`` (the simulation's part of an episode config: controller, seed,
 randomization, scene, physics; the key mapping's settings are in the log's ``teleop_start``
 record), ``log.jsonl``, the full-rate force trace ``forces.npz`` and the states at every control
@@ -24,7 +24,10 @@ import numpy as np
 from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
 from peg_ctrl.config import to_dict
 from peg_ctrl.controllers import ControllerConfig
-from peg_ctrl.episode import (
+from peg_ctrl.controllers.base import Controller
+from peg_ctrl.errors import EpisodeFailure
+from peg_ctrl.io import atomic_write_text, to_json
+from peg_ctrl.run.episode import (
     EpisodeConfig,
     RandomizationConfig,
     compiled_model,
@@ -32,19 +35,16 @@ from peg_ctrl.episode import (
     contact_to_seat,
     loop_fields,
 )
-from peg_ctrl.episode_log import EpisodeLogger
-from peg_ctrl.errors import EpisodeFailure
-from peg_ctrl.io import atomic_write_text, to_json
-from peg_ctrl.loop import Loop, StepInfo
-from peg_ctrl.monitors import ContactMonitor
-from peg_ctrl.physics import SEED, PhysicsConfig
-from peg_ctrl.physics import profile as physics_profile
-from peg_ctrl.recorders import StateRecorder, TraceRecorder, step_record
-from peg_ctrl.scene import HOME_KEY, SceneConfig
-from peg_ctrl.state import ControlState, PegObservation, StateReader
+from peg_ctrl.run.episode_log import EpisodeLogger
+from peg_ctrl.run.loop import Loop, StepInfo
+from peg_ctrl.run.recorders import StateRecorder, TraceRecorder, step_record
+from peg_ctrl.sim.physics import SEED, PhysicsConfig
+from peg_ctrl.sim.physics import profile as physics_profile
+from peg_ctrl.sim.scene import HOME_KEY, SceneConfig
+from peg_ctrl.sim.state import ControlState, PegObservation, StateReader
+from peg_ctrl.tasks.monitors import ContactMonitor, InsertionMeasure
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
 from peg_ctrl.teleop.task import TeleopTask, crossed
-from peg_ctrl.timing import control_decimation
 
 __all__ = ["TeleopSession"]
 
@@ -57,7 +57,7 @@ class TeleopSession:
 
     ``controller`` is a registered name or a controller config; ``scene`` and ``physics`` (default
     the seed profile) build the model. They are checked as an episode config's are
-    (:class:`~peg_ctrl.episode.EpisodeConfig`) before anything is written.
+    (:class:`~peg_ctrl.run.episode.EpisodeConfig`) before anything is written.
     """
 
     def __init__(
@@ -89,33 +89,18 @@ class TeleopSession:
         self.randomize = randomize
         self.out_dir = Path(out_dir)
         ctrl = ctrl_cfg.build(self.model)
-        decimation = control_decimation(ctrl.control_dt, self.model.opt.timestep)  # before any output
         # The step limit is SPEC §5's, in steps of the seed profile; a finer step gets the same time.
         self.max_steps = round(self.cfg.max_steps * SEED.timestep / self.model.opt.timestep)
         self.logger = EpisodeLogger(self.out_dir)
         resolved = {k: v for k, v in to_dict(episode).items() if k in _SIMULATION_FIELDS}
         atomic_write_text(self.out_dir / "config.json", _json(resolved))
-        # The mapper starts at the home pose, jaw open; the task resets it on every attempt.
-        home = mujoco.MjData(self.model)
-        mujoco.mj_resetDataKeyframe(self.model, home, self.model.key(HOME_KEY).id)
-        s = StateReader(self.model).control_state(home)
-        self.mapper = TeleopMapper(
-            self.cfg, p_world=s.p_world, quat_world=s.quat_world, jaw_sep_m=JAW_SEP_MAX_M
-        )
+        self.mapper = self._home_mapper()
         self.task = TeleopTask(
-            self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=decimation
+            self.mapper, scene=self.scene, config=self.cfg, randomize=randomize, decimation=episode.decimation
         )
         self.trace = TraceRecorder(self.logger, self.task.phases)
         self.states = StateRecorder(self.out_dir / "states.npz", self.model.nq)
-        self.loop = Loop(
-            model=self.model,
-            controller=ctrl,
-            task=self.task,
-            scene=self.scene,
-            contact=ContactMonitor(force_spike=None),
-            recorders=[self.trace, self.states, self],
-            phantom_depth=physics_profile(self.physics).phantom_depth,
-        )
+        self.loop = self._loop(ctrl)
         self.data = self.loop.data
         self.attempt = 1
         self.finished = False
@@ -125,16 +110,32 @@ class TeleopSession:
         self.wall0 = time.perf_counter()
         self.loop.reset(np.random.default_rng(seed))
         self.states.start(self.data)
-        self.logger.record(
-            {
-                "event": "teleop_start",
-                "seed": seed,
-                "randomize": randomize,
-                "controller": self.controller_name,
-                "physics": self.physics,
-                "teleop": to_dict(self.cfg),
-            }
+        start = {
+            "seed": seed,
+            "randomize": randomize,
+            "controller": self.controller_name,
+            "physics": self.physics,
+        }
+        self.logger.record({"event": "teleop_start", **start, "teleop": to_dict(self.cfg)})
+
+    def _loop(self, controller: Controller) -> Loop:
+        """The loop: no force-spike failure (the operator may push), the session as a recorder."""
+        return Loop(
+            model=self.model,
+            controller=controller,
+            task=self.task,
+            scene=self.scene,
+            contact=ContactMonitor(force_spike=None),
+            recorders=[self.trace, self.states, self],
+            phantom_depth=physics_profile(self.physics).phantom_depth,
         )
+
+    def _home_mapper(self) -> TeleopMapper:
+        """The key mapper, at the home pose with the jaw open (the task resets it every attempt)."""
+        home = mujoco.MjData(self.model)
+        mujoco.mj_resetDataKeyframe(self.model, home, self.model.key(HOME_KEY).id)
+        s = StateReader(self.model).control_state(home)
+        return TeleopMapper(self.cfg, p_world=s.p_world, quat_world=s.quat_world, jaw_sep_m=JAW_SEP_MAX_M)
 
     # -- state --------------------------------------------------------------------------------
     @property
@@ -225,16 +226,29 @@ class TeleopSession:
         check = self.task.insertion.measure(self.peg())
         inserted = self.task.inserted or self.task.insertion.criterion(check)
         self.task.finish(float(self.data.time), reason)
+        self.summary = self._summary(reason, detail, check, inserted)
+        summary = self.out_dir / "summary.json"
+        try:
+            self.trace.flush()
+            # The record first: packing the trace and the states cannot lose it.
+            atomic_write_text(summary, _json(self.summary))
+            self.summary["trace_path"] = str(self.logger.npz_path)
+            self.logger.close({"event": "end", **self.summary})
+            self.states.close()
+            atomic_write_text(summary, _json(self.summary))
+        finally:
+            self.logger.abort()
+        return self.summary
+
+    def _summary(self, reason: str, detail: str, check: InsertionMeasure, inserted: bool) -> dict[str, Any]:
+        """The fields of ``peg-sim run``'s summary, and teleop's own (see :meth:`finish`)."""
         if inserted:
             status = "success"
         else:
             status = "interrupted" if reason == "interrupted" else "failure"
         fields = contact_fields(self.loop, check, seated=inserted, assets=self.scene.assets)
-        tti, first = self.task.time_to_insert, fields["first_contact_s"]
-        # None unless the peg touched the block before the insertion was detected (the operator
-        # may lower it in without touching, then let it fall against the bore).
-        to_seat = contact_to_seat(first, tti)
-        self.summary = {
+        tti = self.task.time_to_insert
+        return {
             "status": status,
             "reason": "" if status == "success" else reason,
             "phase": "teleop",
@@ -250,7 +264,9 @@ class TeleopSession:
             **fields,
             "peg_slip_m": None,
             "time_to_insert_s": tti,
-            "contact_to_seat_s": to_seat,
+            # None unless the peg touched the block before the insertion was detected (the
+            # operator may lower it in without touching, then let it fall against the bore).
+            "contact_to_seat_s": contact_to_seat(fields["first_contact_s"], tti),
             "detail": detail or f"session ended: {reason}",
             "log_path": str(self.logger.log_path),
             "trace_path": str(self.logger.trace_path),
@@ -263,18 +279,6 @@ class TeleopSession:
             "peg_bottom_z_m": check.bottom_z_m,
             **loop_fields(self.loop),
         }
-        summary = self.out_dir / "summary.json"
-        try:
-            self.trace.flush()
-            # The record first: packing the trace and the states cannot lose it.
-            atomic_write_text(summary, _json(self.summary))
-            self.summary["trace_path"] = str(self.logger.npz_path)
-            self.logger.close({"event": "end", **self.summary})
-            self.states.close()
-            atomic_write_text(summary, _json(self.summary))
-        finally:
-            self.logger.abort()
-        return self.summary
 
     # -- overlay ------------------------------------------------------------------------------
     def overlay_lines(self) -> tuple[str, str]:

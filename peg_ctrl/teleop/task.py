@@ -6,9 +6,9 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.monitors import InsertionMeasure, InsertionMonitor, SettledCriterion
-from peg_ctrl.scene import SceneConfig
+from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, close_open_record
+from peg_ctrl.tasks.monitors import InsertionMeasure, InsertionMonitor, SettledCriterion
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, initial_qpos
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
 

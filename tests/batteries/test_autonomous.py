@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from peg_ctrl.batch import run_batch
-from peg_ctrl.episode import EpisodeConfig, RandomizationConfig
+from peg_ctrl.run.batch import run_batch
+from peg_ctrl.run.episode import EpisodeConfig, RandomizationConfig
 
 
 @pytest.mark.slow

@@ -5,8 +5,8 @@ from __future__ import annotations
 import mujoco
 import pytest
 
-from peg_ctrl.scene import HOME_KEY
-from peg_ctrl.state import ControlState, StateReader
+from peg_ctrl.sim.scene import HOME_KEY
+from peg_ctrl.sim.state import ControlState, StateReader
 
 NAMES = ("admittance", "diffik", "impedance", "mpc", "pd", "sampling_mpc")
 

@@ -1,5 +1,5 @@
 """Admittance: its config (with the inner PD's), its law at a fixed state, and closed loop
-(through :class:`peg_ctrl.tracker.Tracker`, a driver of the episode loop)."""
+(through :class:`peg_ctrl.run.tracker.Tracker`, a driver of the episode loop)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pytest
 from peg_ctrl.commands import euler_to_quat
 from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceController
 from peg_ctrl.controllers.pd import PDConfig, PDController
-from peg_ctrl.state import ControlState
-from peg_ctrl.tracker import Tracker
+from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
 

@@ -23,9 +23,9 @@ from peg_ctrl.controllers.base import (
     check_target,
 )
 from peg_ctrl.errors import CommandError, ConfigError, DivergenceError
-from peg_ctrl.jaw import load_default
-from peg_ctrl.state import ControlState
-from peg_ctrl.tracker import Tracker
+from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.jaw import load_default
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
 from .conftest import NAMES
@@ -264,7 +264,7 @@ def test_nan_target_raises_command_error(
 
 @pytest.mark.parametrize("name", NAMES)
 def test_every_controller_holds_a_pose(name: str, model: mujoco.MjModel) -> None:
-    """Closed loop, through :class:`peg_ctrl.tracker.Tracker` (a driver of the episode loop)."""
+    """Closed loop, through :class:`peg_ctrl.run.tracker.Tracker` (a driver of the episode loop)."""
     tracker = Tracker(model, make_controller(name, model))
     goal = target(HOME + [0.03, 0.02, -0.04], euler_to_quat(0.4, 0.0, -0.3))
     state = tracker.hold(goal, 2.5)

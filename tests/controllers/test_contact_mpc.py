@@ -9,7 +9,7 @@ import pytest
 from peg_ctrl.controllers.contact_mpc import ContactQP, ContactSettings
 from peg_ctrl.controllers.mpc import MPCConfig, MPCController
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import target
 

@@ -11,7 +11,7 @@ import pytest
 from peg_ctrl.commands import euler_to_quat
 from peg_ctrl.controllers.diffik import DiffIKConfig, DiffIKController
 from peg_ctrl.controllers.pd import PDConfig
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
 

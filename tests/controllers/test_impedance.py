@@ -8,7 +8,7 @@ import pytest
 
 from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import target
 

@@ -8,7 +8,7 @@ import pytest
 import scipy.integrate
 
 from peg_ctrl.controllers.mpc import MPCConfig, MPCController, discretise
-from peg_ctrl.state import ControlState
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
 

@@ -1,5 +1,5 @@
 """The reference PD controller: its config, its control law at a fixed state, and step responses
-(closed loop, through :class:`peg_ctrl.tracker.Tracker`, a driver of the episode loop)."""
+(closed loop, through :class:`peg_ctrl.run.tracker.Tracker`, a driver of the episode loop)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import pytest
 
 from peg_ctrl.commands import euler_to_quat
 from peg_ctrl.controllers.pd import PDConfig, PDController
-from peg_ctrl.scene import SLIDE_JOINTS
-from peg_ctrl.state import ControlState
-from peg_ctrl.tracker import Tracker
+from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.scene import SLIDE_JOINTS
+from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
 

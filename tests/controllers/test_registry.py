@@ -154,7 +154,8 @@ def test_imports_first_in_a_fresh_interpreter_without_higher_layers(module: str)
     code = (
         "import sys\n"
         f"import peg_ctrl.controllers{module}\n"
-        "higher = ('peg_ctrl.sim', 'peg_ctrl.episode', 'peg_ctrl.task', 'peg_ctrl.tasks', 'peg_ctrl.loop')\n"
+        "higher = ('peg_ctrl.run', 'peg_ctrl.tasks', 'peg_ctrl.teleop', 'peg_ctrl.gym', 'peg_ctrl.tools',\n"
+        "          'peg_ctrl.cli', 'peg_ctrl.experiments')\n"
         "loaded = sorted(m for m in sys.modules if m.startswith(higher))\n"
         "assert not loaded, loaded\n"
     )

@@ -6,7 +6,6 @@ import mujoco
 import numpy as np
 import pytest
 
-from peg_ctrl.belief import Belief
 from peg_ctrl.controllers.belief_model import HAND_JOINTS, BeliefModelSpec, build_belief_model
 from peg_ctrl.controllers.sampling_mpc import (
     METHODS,
@@ -16,8 +15,9 @@ from peg_ctrl.controllers.sampling_mpc import (
     _turn_to_quat,
 )
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.rotations import rotate
-from peg_ctrl.tracker import Tracker
+from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.belief import Belief
+from peg_ctrl.sim.rotations import rotate
 
 from ..conftest import HOME, target
 

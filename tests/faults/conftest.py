@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from peg_ctrl.episode_log import TRACE_COLUMNS
+from peg_ctrl.run.episode_log import TRACE_COLUMNS
 
 
 def _refuse_constant(name: str) -> Any:

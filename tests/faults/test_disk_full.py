@@ -24,8 +24,8 @@ from typing import Any
 
 import pytest
 
-from peg_ctrl.episode_log import TRACE_COLUMNS
 from peg_ctrl.progress import ENV_VAR
+from peg_ctrl.run.episode_log import TRACE_COLUMNS
 
 PAGE = os.sysconf("SC_PAGE_SIZE")  # tmpfs counts whole pages
 ENOSPC = "No space left on device"

@@ -25,8 +25,8 @@ from hypothesis.configuration import set_hypothesis_home_dir
 from peg_ctrl.commands import GripperTarget, TaskFrame, command_to_target
 from peg_ctrl.config import is_selectable, read_mapping
 from peg_ctrl.controllers import REGISTRY, ControllerConfig
-from peg_ctrl.episode import EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.errors import FAILURE_REASONS, EpisodeFailure, PegCtrlError
+from peg_ctrl.run.episode import EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.tasks import TASKS
 
 # Hypothesis keeps caches in ./.hypothesis; not in the repository.

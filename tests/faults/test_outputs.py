@@ -24,18 +24,18 @@ import pytest
 
 from peg_ctrl import io
 from peg_ctrl.cli import main
-from peg_ctrl.episode import EpisodeConfig, EpisodeResult, run_episode
-from peg_ctrl.episode_log import EpisodeLogger, read_log
 from peg_ctrl.errors import FAILURE_REASONS, OutputError, OutputWarning
-from peg_ctrl.monitors import (
+from peg_ctrl.run.episode import EpisodeConfig, EpisodeResult, run_episode
+from peg_ctrl.run.episode_log import EpisodeLogger, read_log
+from peg_ctrl.sim.scene import SceneConfig
+from peg_ctrl.sim.state import PegObservation
+from peg_ctrl.tasks.monitors import (
     AT_HOLE_MAX_TILT,
     END_STATES,
     InsertionMonitor,
     SeatedCriterion,
     episode_end_state,
 )
-from peg_ctrl.scene import SceneConfig
-from peg_ctrl.state import PegObservation
 
 HOLE_METRICS = ("insertion_depth_m", "lateral_error_m", "tilt_rad")
 
@@ -380,12 +380,12 @@ def test_a_plot_that_fails_is_a_warning_and_a_null_path(
     capsys: pytest.CaptureFixture[str],
     strict_json: Callable[[str], Any],
 ) -> None:
-    import peg_ctrl.plots
+    import peg_ctrl.run.plots
 
     def broken(*args: Any, **kwargs: Any) -> Path:
         raise RuntimeError("no fonts\nat all")
 
-    monkeypatch.setattr(peg_ctrl.plots, "plot_force_profile", broken)
+    monkeypatch.setattr(peg_ctrl.run.plots, "plot_force_profile", broken)
     assert main(["run", "--max-steps", "300", "--out", str(tmp_path)]) == 1  # the episode's own code
     err = capsys.readouterr().err
     assert err == "peg-sim: warning: force plot not written: no fonts at all\n"
@@ -399,14 +399,14 @@ def test_a_plot_that_fails_is_a_warning_and_a_null_path(
 def test_a_full_disk_at_the_plot_keeps_the_summary(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, strict_json: Callable[[str], Any]
 ) -> None:
-    import peg_ctrl.plots
+    import peg_ctrl.run.plots
 
     def full(trace: Path, phases: Any, out: Path) -> Path:
         with io.atomic_path(out) as tmp:
             tmp.write_bytes(b"\x89PNG half")
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(peg_ctrl.plots, "plot_force_profile", full)
+    monkeypatch.setattr(peg_ctrl.run.plots, "plot_force_profile", full)
     with pytest.raises(OutputError, match=r"force_profile\.png': No space left on device"):
         run_episode(EpisodeConfig(max_steps=300), tmp_path)
     summary = strict_json((tmp_path / "summary.json").read_text())

@@ -25,15 +25,15 @@ from pathlib import Path
 
 import pytest
 
-from peg_ctrl.batch import run_batch
 from peg_ctrl.cli import main
-from peg_ctrl.episode import WALL_CLOCK_FIELDS
 from peg_ctrl.errors import ConfigError, OutputError, OutputInUse
 from peg_ctrl.experiments.config import experiment_from_mapping
 from peg_ctrl.experiments.report import episodes_csv_problem
 from peg_ctrl.experiments.runner import run_sweep
 from peg_ctrl.io import LOCK_NAME, lock_output_dir
-from peg_ctrl.workers import WATCH_PERIOD_S, worker_pool
+from peg_ctrl.run.batch import run_batch
+from peg_ctrl.run.episode import WALL_CLOCK_FIELDS
+from peg_ctrl.run.workers import WATCH_PERIOD_S, worker_pool
 
 from ..conftest import assert_one_line_error, peg_sim, sigint_default
 
@@ -257,7 +257,7 @@ def test_an_orphaned_worker_ends_itself_without_the_kernel_signal(tmp_path: Path
     marker, ready = uuid.uuid4().hex, tmp_path / "watching"
     child = (
         "import os, sys, threading, time\n"
-        "from peg_ctrl import workers\n"
+        "from peg_ctrl.run import workers\n"
         "threading.Thread(target=workers._watch_parent, args=(int(sys.argv[1]),), daemon=True).start()\n"
         "open(sys.argv[2], 'w').close()\n"
         "time.sleep(120)\n"
@@ -314,7 +314,7 @@ def test_ctrl_c_ends_a_sweep_and_starts_no_queued_episode(to: str, tmp_path: Pat
 def test_ctrl_c_while_the_workers_start_prints_no_traceback(tmp_path: Path, sweep_file: Path) -> None:
     """Workers start with SIGINT ignored: a Ctrl-C in their first second (imports) is the parent's.
     (Not in the few milliseconds in which they are started: there the parent ignores it too, see
-    ``peg_ctrl.workers._children_ignore_sigint``.)"""
+    ``peg_ctrl.run.workers._children_ignore_sigint``.)"""
     out, marker = tmp_path / "out", uuid.uuid4().hex
     proc = _start_sweep(sweep_file, out, marker, tmp_path / "stderr.txt")
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from peg_ctrl.config import ConfigError, apply_overrides
-from peg_ctrl.episode import EpisodeResult, build_loop, episode_config_from_mapping, run_episode
 from peg_ctrl.errors import UnknownComponent
-from peg_ctrl.monitors import InsertionMeasure, classify_end_state
+from peg_ctrl.run.episode import EpisodeResult, build_loop, episode_config_from_mapping, run_episode
 from peg_ctrl.tasks import TASKS, HeldInsertionConfig
+from peg_ctrl.tasks.monitors import InsertionMeasure, classify_end_state
 from peg_ctrl.tasks.pick_and_place import TaskConfig
 
 #: The peg's lower end in the gripper frame for the held grasp: a remote centre of compliance.

@@ -7,7 +7,7 @@ import pytest
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import EpisodeFailure
-from peg_ctrl.state import ControlState, PegObservation
+from peg_ctrl.sim.state import ControlState, PegObservation
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import DONE, PhaseMachine, PhaseSpec, Timeout
 

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from peg_ctrl.config import apply_overrides
-from peg_ctrl.episode import EpisodeResult, episode_config_from_mapping, run_episode
 from peg_ctrl.errors import EpisodeFailure
-from peg_ctrl.jaw import load_default
 from peg_ctrl.planners import MotionLimits, make_planner
-from peg_ctrl.scene import SceneConfig
-from peg_ctrl.state import ControlState, PegObservation
+from peg_ctrl.run.episode import EpisodeResult, episode_config_from_mapping, run_episode
+from peg_ctrl.sim.jaw import load_default
+from peg_ctrl.sim.scene import SceneConfig
+from peg_ctrl.sim.state import ControlState, PegObservation
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.pick_and_place import (
     CENTER_PASSES,

@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from peg_ctrl.assets import AssetParams
-from peg_ctrl.episode import EpisodeResult
-from peg_ctrl.episode_log import TRACE_COLUMNS, read_log, read_trace
 from peg_ctrl.errors import EpisodeFailure
-from peg_ctrl.monitors import FIRST_CONTACT_N
-from peg_ctrl.scene import SceneConfig
+from peg_ctrl.run.episode import EpisodeResult
+from peg_ctrl.run.episode_log import TRACE_COLUMNS, read_log, read_trace
+from peg_ctrl.sim.assets import AssetParams
+from peg_ctrl.sim.scene import SceneConfig
+from peg_ctrl.tasks.monitors import FIRST_CONTACT_N
 from peg_ctrl.teleop import SCRIPTED_INSERTION, ScriptedOperator, TeleopConfig, TeleopSession
 
 CFG = TeleopConfig()
@@ -146,9 +146,9 @@ def test_a_failure_in_the_loop_ends_the_session_with_its_records(
 
 
 def test_scripted_session_can_be_replayed(scripted) -> None:
-    from peg_ctrl.episode import episode_config_from_mapping
-    from peg_ctrl.recorders import read_states
-    from peg_ctrl.replay import load_run
+    from peg_ctrl.run.episode import episode_config_from_mapping
+    from peg_ctrl.run.recorders import read_states
+    from peg_ctrl.tools.replay import load_run
 
     session, summary, out = scripted
     cfg = episode_config_from_mapping(json.loads((out / "config.json").read_text()))
@@ -162,7 +162,7 @@ def test_scripted_session_can_be_replayed(scripted) -> None:
 
 
 def test_a_reset_keeps_the_clock_running(tmp_path: Path) -> None:
-    from peg_ctrl.recorders import read_states
+    from peg_ctrl.run.recorders import read_states
 
     s = TeleopSession(tmp_path)
     s.advance(0.1)

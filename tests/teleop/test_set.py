@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from peg_ctrl.cli import main
-from peg_ctrl.episode_log import read_log
-from peg_ctrl.physics import PRECISION
+from peg_ctrl.run.episode_log import read_log
+from peg_ctrl.sim.physics import PRECISION
 from peg_ctrl.teleop import ScriptedOperator
 
 from ..conftest import assert_one_line_error, peg_sim

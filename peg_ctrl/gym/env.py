@@ -1,0 +1,540 @@
+"""Gymnasium environment ``peg_ctrl/PegInsertion-v0``: the simulator for RL and imitation learning.
+
+Registered when :mod:`peg_ctrl` is imported::
+
+    import gymnasium as gym
+    import peg_ctrl  # noqa: F401  (registers the environment)
+
+    env = gym.make("peg_ctrl/PegInsertion-v0", task="held_insertion", controller="impedance")
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+
+It runs on the one :class:`~peg_ctrl.run.loop.Loop`: an action is the command of one control period
+(the controller's ``control_dt``, 5 ms for the default ``pd``), the controller tracks it on the
+same actuators as every other driver, and the loop's monitors (force spike, grasp slip, tilt in
+the hand, divergence) and the task family's insertion check decide how an episode ends.
+
+Task (``task=``, a task name or a mapping ``{name: ..., <field>: ...}``)
+    ``held_insertion`` (default): the peg starts in the closed hand, its lower end 3 mm above
+    the hole's mouth, with the task's drawn disturbances (``lateral_error``, ``tilt_error`` in the
+    grasp, random gripper yaw); see :mod:`peg_ctrl.tasks.held_insertion`. ``pick_and_place``: the
+    peg starts lying on the table (its pose randomised with ``randomize``); the agent must grasp,
+    turn and insert it. Only the start state and the insertion check come from the task: the
+    agent's actions replace its phase machine.
+
+Action (``action_mode=``), ``float32``, shape ``(7,)``
+    ``"delta"`` (default): ``[dx, dy, dz, droll, dpitch, dyaw, jaw]`` in ``[-1, 1]``. The target
+    pose is the gripper's *measured* pose moved by ``a[:3] * MAX_SPEED * control_dt`` [m] and
+    turned by ``a[3:6] * MAX_ANGULAR_SPEED * control_dt`` [rad] (extrinsic X-Y-Z in the world
+    frame), with the same velocity as a feed-forward; ``jaw`` sets the pad separation: ``-1``
+    fully open (0.085 m), ``+1`` closed (robosuite's convention).
+    ``"absolute"``: the command API ``[x, y, z, roll, pitch, yaw, jaw_sep_m]`` (see
+    :mod:`peg_ctrl.commands`) in the world frame, bounded by :data:`WORKSPACE` and ``[0, 0.085]``
+    m. Actions outside the space are clipped; a non-finite action raises ``ValueError``.
+
+Observation, a ``Dict`` of ``float32`` arrays (world frame unless stated; quaternions ``[w, x,
+y, z]`` with ``w >= 0``)
+    ``gripper_pos`` (3,) pinch point [m]; ``gripper_quat`` (4,); ``gripper_vel`` (6,) linear [m/s]
+    (world) and angular [rad/s] (gripper frame) velocity; ``jaw`` (1,) measured pad separation
+    [m]; ``ft_wrench`` (6,) the wrist force/torque sensor, force [N] and torque [N m] that the
+    base exerts on the gripper, in the world frame, with any ``disturbances`` sensor noise;
+    ``peg_pos`` (3,) [m] and ``peg_quat`` (4,) the peg's centre and orientation; ``hole_pos``
+    (3,) the centre of the hole's mouth [m] (the goal). Flatten it with
+    ``gymnasium.wrappers.FlattenObservation`` for a single vector.
+
+Reward (``reward_mode=``)
+    Built so that the undiscounted return orders the outcomes: **any failure < holding still
+    until truncation < any success**, in both modes (``tests/gym/test_env.py`` checks it on
+    the physics). ``"sparse"`` (default): ``+1`` on the step the peg is seated, ``-1`` on the
+    step a monitor fails the episode, else 0. ``"shaped"``: ``+3`` seated, ``-3`` failed, plus
+    two bounded shaping terms on every step:
+
+    - ``progress = closeness_now - closeness_before`` (potential-based shaping, Ng et al.
+      1999: it pays for moving towards the goal when it happens, and sums over an episode to
+      the closeness gained, in ``[-1, 1]``); ``closeness = 1 - tanh(d_goal / 0.03 m)`` for
+      ``held_insertion``, the mean of that and ``1 - tanh(d_reach / 0.1 m)`` for
+      ``pick_and_place``;
+    - ``force_penalty = -0.5 * tanh(max(0, F - 10 N) / 10 N) / max_steps``, which sums to at
+      least -0.5 over an episode.
+
+    ``d_goal`` [m] is the distance from the peg's lower end to the seated goal (the hole axis
+    from ``success.min_depth`` below the mouth down), ``d_reach`` [m] the distance from the
+    pinch point to the peg's centre and ``F`` [N] the control period's peak peg-block contact
+    force. So a success returns at least 1.5, holding still between -1.5 and 1 (about 0: the
+    peg does not move), a failure at most -2. ``info["reward_terms"]`` has the parts: the
+    factors ``goal``, ``reach`` (1 for ``held_insertion``), ``closeness`` (each in ``[0, 1]``)
+    and the summands ``progress``, ``force_penalty``, ``success``, ``failure`` (their sum is
+    the reward).
+
+Termination and truncation
+    ``terminated`` when the peg is seated (``info["success"]``: depth ≥ ``success.min_depth``,
+    lateral error ≤ ``success.max_lateral_error``, tilt ≤ ``success.max_tilt`` for
+    ``success.consecutive_steps`` control steps) or a monitor fails the episode
+    (``info["reason"]``: ``force_spike``, ``grasp_lost``, ``excessive_tilt`` or ``diverged``).
+    ``truncated`` after ``time_limit_s`` of simulated time (default 5 s for ``held_insertion``,
+    20 s for ``pick_and_place``). ``info`` also has ``depth_m``, ``lateral_error_m`` and
+    ``tilt_rad`` of the peg in the hole (NaN while the peg is not at the hole: lying, or beside
+    the block), ``peg_block_force_n`` (the period's peak) and ``t`` [s].
+
+Other keyword arguments of ``gymnasium.make``
+    ``controller`` (name or mapping, default ``pd``); ``profile`` (physics profile, default
+    ``seed``); ``disturbances`` (a mapping of :class:`~peg_ctrl.run.episode.DomainConfig` fields:
+    ``peg_mass_scale``, ``friction_scale``, ``gain_scale`` ranges drawn per episode, and
+    ``position_noise``, ``velocity_noise``, ``force_noise`` on the sensed state); ``scene`` (a
+    mapping of :class:`~peg_ctrl.sim.scene.SceneConfig` fields, e.g. ``{"assets": {"clearance":
+    1e-4, "chamfer": 1e-3}}``); ``config`` (a base episode config: a mapping or a file path, which
+    the other arguments override); ``randomize`` (the pick-and-place start pose, default True);
+    ``fixed_jaw`` (``held_insertion`` only, default False: keep the jaw closed on the peg and
+    ignore the action's ``jaw``, so that exploration cannot drop the peg);
+    ``render_mode`` (``"rgb_array"`` or ``"human"``), ``width`` and ``height`` [px].
+
+Seeding
+    ``reset(seed=s)`` seeds the environment's generator; each episode's start state, domain draw
+    and sensor noise come from it, so the same seed and actions give the same observations.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import os
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget, euler_to_quat
+from peg_ctrl.config import ConfigError, read_mapping
+from peg_ctrl.errors import CommandError, EpisodeFailure
+from peg_ctrl.run.episode import DomainConfig, EpisodeConfig, build_loop, episode_config_from_mapping
+from peg_ctrl.run.loop import Loop, StepInfo
+from peg_ctrl.run.recorders import FollowCamera
+from peg_ctrl.sim.rotations import quat_mul, rotate_inv
+from peg_ctrl.sim.state import BLOCK_PEG, ControlState, ft_world
+from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, Task, close_open_record
+
+__all__ = [
+    "ENV_ID",
+    "PegInsertionEnv",
+    "AgentTask",
+    "WORKSPACE",
+    "MAX_SPEED",
+    "MAX_ANGULAR_SPEED",
+    "ACTION_MODES",
+    "REWARD_MODES",
+]
+
+ENV_ID = "peg_ctrl/PegInsertion-v0"
+ACTION_MODES = ("delta", "absolute")
+REWARD_MODES = ("sparse", "shaped")
+#: Bounds of the commanded pinch point in absolute mode, ``(low, high)`` per axis [m].
+WORKSPACE = ((-0.45, -0.3, 0.0), (0.45, 0.3, 0.4))
+MAX_SPEED = 0.2  # [m/s] of a full delta action
+MAX_ANGULAR_SPEED = 2.0  # [rad/s] of a full delta action
+TIME_LIMIT_S = {"held_insertion": 5.0, "pick_and_place": 20.0}  # default episode length [s of sim]
+#: Terminal rewards ``(success, failure)`` per reward mode. The shaped mode's exceed twice its
+#: shaping's bound (progress in [-1, 1], force penalty in [-0.5, 0] per episode): any success
+#: >= 1.5 > 1 >= holding still >= -1.5 > -2 >= any failure.
+TERMINAL_REWARD = {"sparse": (1.0, -1.0), "shaped": (3.0, -3.0)}
+FORCE_FREE_N = 10.0  # the shaped reward penalises peg-block force above this [N]
+FORCE_PENALTY = 0.5  # the force penalty's bound over a whole episode
+GOAL_SCALE_M = 0.03  # distance of the peg's lower end from the seated goal at which closeness is 0.24
+REACH_SCALE_M = 0.1  # the same for the pinch point's distance from the peg (pick_and_place)
+
+
+class AgentTask:
+    """A task whose targets are an agent's commands: the start state and the insertion check
+    come from ``inner`` (a task family's task), whose own phase machine is not run.
+
+    Success is ``inner``'s seated criterion held for its ``SeatedHold`` steps; the episode
+    never ends by itself otherwise (the environment truncates it).
+    """
+
+    name = "agent"
+    phases: tuple[str, ...] = ("agent",)
+
+    def __init__(self, inner: Task) -> None:
+        if not (hasattr(inner, "insertion") and hasattr(inner, "seated")):
+            raise ConfigError(f"task {inner.name!r} has no insertion check to drive with actions")
+        self.inner = inner
+        self.insertion = inner.insertion  # type: ignore[attr-defined]
+        self.seated = inner.seated  # type: ignore[attr-defined]
+        self.command: GripperTarget | None = None
+        self._records: list[PhaseRecord] = []
+
+    @property
+    def phase(self) -> str:
+        return "agent"
+
+    @property
+    def grasped(self) -> bool:
+        return self.inner.grasped
+
+    @property
+    def records(self) -> list[PhaseRecord]:
+        return self._records
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        self.inner.reset(model, data, rng)
+        self.seated.reset()
+        self._records = []
+        self.command = None
+
+    def start(self, obs: Observation) -> None:
+        self._records.append(PhaseRecord("agent", obs.t))
+
+    def target(self, obs: Observation) -> GripperTarget:
+        if self.command is None:
+            raise RuntimeError("AgentTask.target before a command was set")
+        return self.command
+
+    def evaluate(self, obs: Observation) -> Evaluation:
+        m = self.insertion.measure(obs.peg)
+        if self.seated.update(obs.t, self.insertion.criterion(m)):
+            self.finish(obs.t, "inserted")
+            return Evaluation(True, True, "", "seated", m)
+        return Evaluation(False, False, "", "", m)
+
+    def finish(self, t: float, outcome: str) -> None:
+        close_open_record(self._records, t, outcome)
+
+
+class _LastStep:
+    """A loop recorder that keeps the last control step's peak peg-block force [N]."""
+
+    def __init__(self) -> None:
+        self.block_force = 0.0
+
+    def record(self, loop: Loop, info: StepInfo) -> None:
+        self.block_force = info.forces[BLOCK_PEG]
+
+
+def _vector(low: float, high: float, n: int) -> spaces.Box:
+    return spaces.Box(low, high, shape=(n,), dtype=np.float32)
+
+
+def _canonical(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    return -q if q[0] < 0 else q
+
+
+def _choice(value: str, allowed: tuple[str, ...], what: str) -> str:
+    if value not in allowed:
+        raise ConfigError(f"{what} must be one of {', '.join(allowed)}, got {value!r}")
+    return value
+
+
+def _episode_config(
+    config: Mapping[str, Any] | str | os.PathLike[str] | None,
+    task: str | Mapping[str, Any],
+    controller: str | Mapping[str, Any],
+    profile: str,
+    disturbances: Mapping[str, Any] | None,
+    scene: Mapping[str, Any] | None,
+    randomize: bool,
+    /,
+) -> EpisodeConfig:
+    """The episode config the environment runs: ``config`` (a mapping or a file) with the
+    environment's named arguments (see :class:`PegInsertionEnv`) on top. Raises
+    :class:`ConfigError` naming a bad field."""
+    if config is None:
+        data: dict[str, Any] = {}
+    elif isinstance(config, Mapping):
+        data = copy.deepcopy(dict(config))
+    else:
+        data = read_mapping(Path(config))
+    data["task"] = task if isinstance(task, str) else dict(task)
+    data["controller"] = controller if isinstance(controller, str) else dict(controller)
+    data["physics"] = {**data.get("physics", {}), "profile": profile}
+    data["randomization"] = {**data.get("randomization", {}), "enabled": bool(randomize)}
+    if disturbances is not None:
+        data["domain"] = {**data.get("domain", {}), **dict(disturbances)}
+    if scene is not None:
+        data["scene"] = _merge(data.get("scene", {}), scene)
+    return episode_config_from_mapping(data)
+
+
+def _merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in top.items():
+        nested = isinstance(value, Mapping) and isinstance(out.get(key), Mapping)
+        out[key] = _merge(out[key], value) if nested else value
+    return out
+
+
+def _observation_space() -> spaces.Dict:
+    """The observation: the gripper's pose, velocity and jaw, the wrist wrench, the peg's pose
+    and the hole's position."""
+    inf = np.inf
+    return spaces.Dict(
+        {
+            "gripper_pos": _vector(-10.0, 10.0, 3),
+            "gripper_quat": _vector(-1.0, 1.0, 4),
+            "gripper_vel": _vector(-inf, inf, 6),
+            "jaw": _vector(0.0, 0.1, 1),
+            "ft_wrench": _vector(-inf, inf, 6),
+            "peg_pos": _vector(-inf, inf, 3),
+            "peg_quat": _vector(-1.0, 1.0, 4),
+            "hole_pos": _vector(-10.0, 10.0, 3),
+        }
+    )
+
+
+def _action_space(action_mode: str) -> spaces.Box:
+    """``delta``: 7 values in [-1, 1]; ``absolute``: the command API's pose in the workspace and
+    the jaw's separation."""
+    if action_mode == "delta":
+        return _vector(-1.0, 1.0, 7)
+    (x0, y0, z0), (x1, y1, z1) = WORKSPACE
+    pi = math.pi
+    return spaces.Box(
+        np.array([x0, y0, z0, -pi, -pi / 2, -pi, 0.0], dtype=np.float32),
+        np.array([x1, y1, z1, pi, pi / 2, pi, JAW_SEP_MAX_M], dtype=np.float32),
+        dtype=np.float32,
+    )
+
+
+class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
+    """Peg-in-hole insertion with the Robotiq 2F-85 on a 6-DoF base (see the module docstring)."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        *,
+        task: str | Mapping[str, Any] = "held_insertion",
+        controller: str | Mapping[str, Any] = "pd",
+        profile: str = "seed",
+        disturbances: Mapping[str, Any] | None = None,
+        scene: Mapping[str, Any] | None = None,
+        config: Mapping[str, Any] | str | os.PathLike[str] | None = None,
+        randomize: bool = True,
+        fixed_jaw: bool = False,
+        action_mode: str = "delta",
+        reward_mode: str = "sparse",
+        time_limit_s: float | None = None,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        self.action_mode = _choice(action_mode, ACTION_MODES, "action_mode")
+        self.reward_mode = _choice(reward_mode, REWARD_MODES, "reward_mode")
+        self.render_mode = self._checked_render_mode(render_mode)
+        self.cfg = _episode_config(config, task, controller, profile, disturbances, scene, randomize)
+        limit = TIME_LIMIT_S.get(self.cfg.task.name, 20.0) if time_limit_s is None else time_limit_s
+        if not (math.isfinite(limit) and limit > 0):
+            raise ConfigError(f"time_limit_s must be a positive number of seconds, got {time_limit_s!r}")
+        self.width, self.height = int(width), int(height)
+        self._randomized_domain = self.cfg.domain != DomainConfig()
+        self._build(self.cfg)
+        self.control_dt = self.loop.control_dt
+        self.max_steps = max(1, round(limit / self.control_dt))
+        m = self.cfg.success.min_depth
+        a = self.cfg.scene.assets
+        hx, hy = self.cfg.scene.hole_xy
+        self.hole_pos = np.array([hx, hy, a.block_size[2]])
+        self._goal = self.hole_pos - np.array([0.0, 0.0, m])
+        self._reach = self.cfg.task.name == "pick_and_place"
+        if fixed_jaw and self.cfg.task.name != "held_insertion":
+            raise ConfigError(
+                f"fixed_jaw=True needs task held_insertion (the peg starts in the hand), got task "
+                f"{self.cfg.task.name!r}, whose agent must open and close the jaw"
+            )
+        self.fixed_jaw = bool(fixed_jaw)
+        self.observation_space = _observation_space()
+        self.action_space = _action_space(self.action_mode)
+        self._renderer: mujoco.Renderer | None = None
+        self._camera: FollowCamera | None = None
+        self._viewer: Any = None
+        self._wall0 = 0.0
+        self._steps = 0
+        self._done = True
+        self._closeness_before = 0.0  # the shaped reward's potential at the last step
+
+    def _checked_render_mode(self, render_mode: str | None) -> str | None:
+        if render_mode is not None:
+            _choice(render_mode, tuple(self.metadata["render_modes"]), "render_mode")
+        if render_mode == "human" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise ConfigError(
+                "render_mode='human' needs a display (DISPLAY is not set); "
+                "use render_mode='rgb_array' headless"
+            )
+        return render_mode
+
+    # -- building ---------------------------------------------------------------------------------
+    def _build(self, cfg: EpisodeConfig) -> None:
+        self.loop = build_loop(cfg)
+        self.task = AgentTask(self.loop.task)
+        self.loop.task = self.task
+        self._last = _LastStep()
+        self.loop.recorders = [self._last]
+        self.model, self.data = self.loop.model, self.loop.data
+
+    # -- the Gymnasium API --------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        super().reset(seed=seed)
+        episode_seed = int(self.np_random.integers(0, 2**31 - 1))
+        if self._randomized_domain:  # a fresh domain draw and noise stream per episode
+            self._build(dataclasses.replace(self.cfg, seed=episode_seed))
+            self._close_renderers()
+        obs = self.loop.reset(np.random.default_rng(episode_seed))
+        self._steps = 0
+        self._done = False
+        self._wall0 = time.perf_counter()
+        m = self.task.insertion.measure(obs.peg)
+        self._closeness_before = self._closeness(self.loop.state())["closeness"]
+        info = self._info(m, success=False, reason="")
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(obs.gripper), info
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
+        if self._done:
+            raise RuntimeError("step() after the episode ended; call reset()")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (7,):
+            raise CommandError(f"action must have shape (7,), got {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise CommandError(f"action must be finite, got {a.tolist()}")
+        self.task.command = self._target(a)
+        success, reason = False, ""
+        try:
+            evaluation = self.loop.step()
+            success, terminated, m = evaluation.success, evaluation.done, evaluation.metrics
+        except EpisodeFailure as failure:  # a monitor ended the step before the task measured it
+            self.task.finish(float(self.data.time), failure.reason)
+            reason, terminated = failure.reason, True
+            assert self.loop.peg is not None
+            m = self.task.insertion.measure(self.loop.peg)
+        self._steps += 1
+        truncated = not terminated and self._steps >= self.max_steps
+        self._done = terminated or truncated
+        state = self.loop.state()
+        reward, terms = self._reward(state, success=success, failed=bool(reason))
+        info = self._info(m, success=success, reason=reason)
+        info["reward_terms"] = terms
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(state), reward, terminated, truncated, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode == "rgb_array":
+            return self._render_rgb()
+        if self.render_mode == "human":
+            self._render_human()
+        return None
+
+    def close(self) -> None:
+        self._close_renderers()
+
+    # -- pieces ---------------------------------------------------------------------------------
+    def _target(self, a: NDArray[np.float64]) -> GripperTarget:
+        if self.action_mode == "absolute":
+            low, high = self.action_space.low, self.action_space.high  # type: ignore[attr-defined]
+            u = np.clip(a, low, high)
+            q = euler_to_quat(*u[3:6])
+            jaw = 0.0 if self.fixed_jaw else float(u[6])
+            return GripperTarget.trusted(u[:3], q, np.zeros(3), np.zeros(3), jaw)
+        a = np.clip(a, -1.0, 1.0)
+        s = self.loop.state()
+        dt = self.control_dt
+        v = a[:3] * MAX_SPEED
+        w_world = a[3:6] * MAX_ANGULAR_SPEED
+        low, high = WORKSPACE
+        p = np.clip(s.p_world + v * dt, low, high)
+        q = quat_mul(euler_to_quat(*(w_world * dt)), s.quat_world)
+        q /= np.linalg.norm(q)
+        jaw = 0.0 if self.fixed_jaw else 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
+        return GripperTarget.trusted(p, q, v, rotate_inv(q, w_world), jaw)
+
+    def _observation(self, s: ControlState) -> dict[str, NDArray[np.float32]]:
+        """The observation of the gripper state ``s`` (noise-free; sensor noise is added here)."""
+        if self.loop.noise is not None:
+            s = self.loop.noise.apply(s)
+        force, torque = ft_world(s)
+        peg = self.loop.peg
+        assert peg is not None
+        f32 = np.float32
+        return {
+            "gripper_pos": s.p_world.astype(f32),
+            "gripper_quat": _canonical(s.quat_world).astype(f32),
+            "gripper_vel": np.concatenate([s.v_world, s.omega_body]).astype(f32),
+            "jaw": np.array([min(max(s.jaw_sep_m, 0.0), 0.1)], dtype=f32),
+            "ft_wrench": np.concatenate([force, torque]).astype(f32),
+            "peg_pos": peg.p_world.astype(f32),
+            "peg_quat": _canonical(peg.quat_world).astype(f32),
+            "hole_pos": self.hole_pos.astype(f32),
+        }
+
+    def _reward(self, s: ControlState, *, success: bool, failed: bool) -> tuple[float, dict[str, float]]:
+        win, lose = TERMINAL_REWARD[self.reward_mode]
+        terms = {"success": win * success, "failure": lose * failed}
+        if self.reward_mode == "shaped":
+            factors = self._closeness(s)
+            excess = max(0.0, self._last.block_force - FORCE_FREE_N) / FORCE_FREE_N
+            terms |= factors
+            terms["progress"] = factors["closeness"] - self._closeness_before
+            terms["force_penalty"] = -FORCE_PENALTY * math.tanh(excess) / self.max_steps
+            self._closeness_before = factors["closeness"]
+        return sum(terms[k] for k in ("success", "failure", "progress", "force_penalty") if k in terms), terms
+
+    def _closeness(self, s: ControlState) -> dict[str, float]:
+        """The shaped reward's potential and its factors, each in ``[0, 1]`` (1 at the goal)."""
+        peg = self.loop.peg
+        assert peg is not None
+        off = peg.bottom_world - self._goal
+        off[2] = max(0.0, off[2])  # deeper than min_depth is on the goal
+        goal = 1.0 - math.tanh(float(np.linalg.norm(off)) / GOAL_SCALE_M)
+        if not self._reach:
+            return {"goal": goal, "reach": 1.0, "closeness": goal}
+        reach = 1.0 - math.tanh(float(np.linalg.norm(s.p_world - peg.p_world)) / REACH_SCALE_M)
+        return {"goal": goal, "reach": reach, "closeness": 0.5 * (goal + reach)}
+
+    def _info(self, m: Any, *, success: bool, reason: str) -> dict[str, Any]:
+        depth, lateral, tilt = (math.nan if v is None else float(v) for v in m.hole_metrics())
+        return {
+            "success": success,
+            "reason": reason,
+            "t": float(self.data.time),
+            "depth_m": depth,  # NaN while the peg is not at the hole (lying, or beside the block)
+            "lateral_error_m": lateral,
+            "tilt_rad": tilt,
+            "peg_block_force_n": float(self._last.block_force),
+        }
+
+    def _render_rgb(self) -> NDArray[np.uint8]:
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            self._camera = FollowCamera(self.model)
+        assert self._camera is not None
+        self._renderer.update_scene(self.data, camera=self._camera.update(self.data))
+        return self._renderer.render()
+
+    def _render_human(self) -> None:
+        if self._viewer is None:
+            import mujoco.viewer
+
+            self._viewer = mujoco.viewer.launch_passive(self.model, self.data)
+        if self._viewer.is_running():
+            self._viewer.sync()
+            lag = self.data.time - (time.perf_counter() - self._wall0)
+            if lag > 0:
+                time.sleep(lag)  # real-time pacing
+
+    def _close_renderers(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None

@@ -1,0 +1,363 @@
+"""The one closed loop. It owns time.
+
+Every control period::
+
+    observe (gripper state, with sensor noise) → task.target → controller.compute → data.ctrl
+    → ``decimation`` physics steps, each followed by one copy of ``data.sensordata`` (in C)
+    → contact forces and penetrations of every physics step at once (numpy, preallocated)
+    → observe the peg → monitors (divergence, contact force spike, grasp slip) → task.evaluate
+    → recorders
+
+Per physics step the loop does only what must happen per step: step the physics and keep its
+contact sensors, so peak forces, the contact impulse, the force-spike check and the force trace
+are at the full physics rate. Everything the control law, the task and the monitors need runs
+once per control period. Autonomous episodes, teleoperation and the benchmark are thin drivers
+of :class:`Loop`; no other code steps the physics in a loop (jaw calibration and the
+benchmark's raw-physics replay aside). The control period must be a whole multiple of the
+physics timestep.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from typing import NamedTuple, Protocol
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.base import Controller, ControlOutput
+from peg_ctrl.errors import DivergenceError, EpisodeFailure
+from peg_ctrl.sim.scene import HOME_KEY, SceneConfig
+from peg_ctrl.sim.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
+from peg_ctrl.tasks.base import Evaluation, Observation, Task
+from peg_ctrl.tasks.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
+from peg_ctrl.timing import control_decimation
+
+__all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTimer", "PhantomGuard"]
+
+
+class SensorNoise:
+    """Zero-mean Gaussian noise on the sensed gripper state; standard deviations in [m], [m/s]
+    (and [rad/s]), [N] (and [N m]); drawn from ``rng``."""
+
+    def __init__(self, *, position: float, velocity: float, force: float, rng: np.random.Generator) -> None:
+        self.position, self.velocity, self.force = position, velocity, force
+        self.rng = rng
+
+    def apply(self, s: ControlState) -> ControlState:
+        rng = self.rng
+        return s._replace(
+            p_world=s.p_world + rng.normal(0.0, self.position, 3),
+            v_world=s.v_world + rng.normal(0.0, self.velocity, 3),
+            omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3),
+            ft_wrench=s.ft_wrench + rng.normal(0.0, self.force, 6),
+        )
+
+
+class StepInfo(NamedTuple):
+    """One control step, for recorders: ``step`` physics steps done, time ``t`` [s] after it.
+
+    ``forces`` and ``penetrations`` are the largest of the control period's physics steps; the
+    sensors of every physics step are in ``sensors`` (valid during ``record`` only).
+    """
+
+    step: int
+    t: float
+    phase: str
+    gripper: ControlState  # as sensed when the step started
+    target: GripperTarget
+    output: ControlOutput
+    peg: PegObservation  # after the step
+    forces: list[float]  # peak net contact force per pair of state.PAIRS [N]
+    penetrations: list[float]  # peak per state.PEG_PARTNERS [m]
+    sensors: SensorBlock  # the period's physics steps, one row each
+    peg_qpos: NDArray[np.float64]  # (decimation, 7) the peg's pose after each physics step
+
+
+class PhantomGuard:
+    """Steps the physics, recomputing a step's collisions without multiccd when the collider
+    returns a phantom peg-block contact (deeper than ``depth`` [m]; see
+    :attr:`peg_ctrl.sim.physics.PhysicsProfile.phantom_depth`).
+
+    ``mj_step1`` + ``mj_step2`` is bit-identical to ``mj_step`` (not available for RK4), so a
+    step without a phantom is exactly the plain one. ``count`` is the number of recomputed steps.
+    """
+
+    def __init__(self, model: mujoco.MjModel, depth: float) -> None:
+        if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+            raise ValueError("the phantom-contact guard needs a split step; RK4 has none")
+        self.depth = depth
+        self._peg = set(np.flatnonzero(model.geom_bodyid == model.body("peg").id).tolist())
+        self._block = set(np.flatnonzero(model.geom_bodyid == model.body("block").id).tolist())
+        self.count = 0
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        mujoco.mj_step1(model, data)
+        if data.ncon and self._phantom(data):
+            flags = model.opt.disableflags
+            model.opt.disableflags = flags | mujoco.mjtDisableBit.mjDSBL_MULTICCD
+            try:
+                mujoco.mj_step1(model, data)  # positions and velocities are still this step's
+            finally:
+                model.opt.disableflags = flags
+            self.count += 1
+        mujoco.mj_step2(model, data)
+
+    def _phantom(self, data: mujoco.MjData) -> bool:
+        # Plain Python over a handful of contacts: numpy's per-call cost would dominate.
+        contact = data.contact
+        limit = -self.depth
+        deep = [i for i, d in enumerate(contact.dist.tolist()) if d < limit]
+        if not deep:
+            return False
+        geoms = contact.geom.tolist()
+        peg, block = self._peg, self._block
+        for i in deep:
+            a, b = geoms[i]
+            if (a in peg and b in block) or (b in peg and a in block):
+                return True
+        return False
+
+
+class LoopTimer:
+    """Optional per-section CPU timing of :meth:`Loop.step` (for ``peg-sim bench``): seconds
+    summed over steps in ``task`` (target and evaluate), ``controller``, ``physics`` (the
+    physics steps and their sensor copies), ``monitors`` (sensor reduction, observation and
+    checks) and ``recording`` (the recorders)."""
+
+    SECTIONS = ("task", "controller", "physics", "monitors", "recording")
+
+    def __init__(self) -> None:
+        self.seconds = dict.fromkeys(self.SECTIONS, 0.0)
+        self.steps = 0  # control steps timed
+
+    def add(self, task: float, controller: float, physics: float, monitors: float, recording: float) -> None:
+        sec = self.seconds
+        sec["task"] += task
+        sec["controller"] += controller
+        sec["physics"] += physics
+        sec["monitors"] += monitors
+        sec["recording"] += recording
+        self.steps += 1
+
+
+def _no_clock() -> float:
+    return 0.0
+
+
+class Recorder(Protocol):
+    """Receives every control step (including the one on which the episode failed)."""
+
+    def record(self, loop: Loop, info: StepInfo) -> None: ...
+
+
+class LoopOutcome(NamedTuple):
+    """How :meth:`Loop.run` ended: ``status`` is "success", "failure" or "interrupted"."""
+
+    status: str
+    reason: str
+    detail: str
+    evaluation: Evaluation | None  # the task's last verdict (None before the first step)
+
+
+@dataclasses.dataclass
+class Loop:
+    """Model, data, controller, task, monitors and recorders, stepped together."""
+
+    model: mujoco.MjModel
+    controller: Controller
+    task: Task
+    scene: SceneConfig
+    contact: ContactMonitor = dataclasses.field(default_factory=ContactMonitor)
+    history: ContactHistory = dataclasses.field(default_factory=ContactHistory)
+    grasp: GraspMonitor | None = None
+    noise: SensorNoise | None = None
+    recorders: Sequence[Recorder] = ()
+    contact_threshold_n: float = 0.01  # contacts below this are left out of logs [N]
+    phantom_depth: float | None = None  # see PhantomGuard; None: plain mj_step
+
+    def __post_init__(self) -> None:
+        self.data = mujoco.MjData(self.model)
+        self.reader = StateReader(self.model, contact_threshold_n=self.contact_threshold_n)
+        self.decimation = control_decimation(self.controller.control_dt, self.model.opt.timestep)
+        self.divergence = DivergenceMonitor()
+        self.sensors = self.reader.sensor_block(self.decimation)
+        self.peg_qpos = np.zeros((self.decimation, 7))
+        self._block_force = np.zeros(self.decimation)  # peg-block force of each physics step [N]
+        self._peg_q = self.data.qpos[self.reader.peg_qpos_slice]  # a view into data
+        self.timer: LoopTimer | None = None
+        self._half_length = 0.5 * self.scene.assets.peg_length
+        self._home = self.model.key(HOME_KEY).id
+        self.steps = 0  # physics steps since reset
+        self.last: Evaluation | None = None
+        self.output: ControlOutput | None = None  # the controller's last output
+        self.peg: PegObservation | None = None
+        self.guard = PhantomGuard(self.model, self.phantom_depth) if self.phantom_depth is not None else None
+        # A controller that plans on a model of the world hears the task's belief (peg_ctrl.sim.belief).
+        self._observe = getattr(self.controller, "observe_belief", None)
+        self._belief: object = None
+        self.compute_times: list[float] = []  # the controller's wall time per control step [s]
+
+    @property
+    def control_dt(self) -> float:
+        """Control period [s]."""
+        return self.decimation * float(self.model.opt.timestep)
+
+    def state(self) -> ControlState:
+        """The gripper's state now, noise-free."""
+        return self.reader.control_state(self.data)
+
+    def reset(self, rng: np.random.Generator) -> Observation:
+        """Home keyframe, the task's initial state from ``rng``, one ``mj_forward``; resets the
+        controller, monitors and task. Returns the first (noise-free) observation."""
+        data = self.data
+        mujoco.mj_resetDataKeyframe(self.model, data, self._home)
+        self.task.reset(self.model, data, rng)
+        mujoco.mj_forward(self.model, data)
+        state = self.reader.control_state(data)
+        self.controller.reset(state)
+        self._belief = None
+        self.compute_times = []
+        forces, _ = self.reader.pair_forces(data)
+        self.peg = self.reader.peg(data, forces[BLOCK_PEG], self._half_length)
+        obs = Observation(float(data.time), state, self.peg)
+        self.task.start(obs)
+        self.contact.reset()
+        self.history.reset()
+        if self.grasp is not None:
+            self.grasp.reset()
+        self.divergence.reset(data)
+        self.sensors.raw[:] = 0.0
+        if self.guard is not None:
+            self.guard.count = 0
+        self.steps = 0
+        self.last = None
+        return obs
+
+    def step(self) -> Evaluation:
+        """One control period; raises :class:`EpisodeFailure` if a monitor or the task fails."""
+        timer = self.timer
+        clock = time.thread_time if timer is not None else _no_clock
+        data = self.data
+        assert self.peg is not None, "reset() first"
+        t0 = clock()
+        state = self.reader.control_state(data)
+        if self.noise is not None:
+            state = self.noise.apply(state)
+        target = self.task.target(Observation(float(data.time), state, self.peg))
+        t1 = clock()
+        out = self._compute(state, target)
+        t2 = clock()
+        self._physics(out)
+        t3 = clock()
+        forces, pens, failure = self._monitor(state)
+        t4 = clock()
+        if failure is None:
+            failure = self._evaluate(state)
+        t5 = clock()
+        info = StepInfo(
+            self.steps,
+            float(data.time),
+            self.task.phase,
+            state,
+            target,
+            out,
+            self.peg,  # type: ignore[arg-type]
+            forces,
+            pens,
+            self.sensors,
+            self.peg_qpos,
+        )
+        for recorder in self.recorders:
+            recorder.record(self, info)
+        if timer is not None:
+            timer.add(t1 - t0 + t5 - t4, t2 - t1, t3 - t2, t4 - t3, clock() - t5)
+        if failure is not None:
+            raise failure
+        assert self.last is not None
+        return self.last
+
+    def _compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
+        if self._observe is not None:
+            belief = getattr(self.task, "belief", None)
+            if belief is not self._belief:
+                self._belief = belief
+                self._observe(belief)
+        try:
+            out = self.controller.compute(state, target)
+        except DivergenceError as exc:
+            raise EpisodeFailure("diverged", f"controller rejected the state: {exc}") from None
+        self.output = out
+        self.compute_times.append(out.diagnostics.solve_time_s)
+        return out
+
+    def _physics(self, out: ControlOutput) -> None:
+        """Apply ``out`` and run the control period's physics steps, keeping their sensors."""
+        model, data = self.model, self.data
+        data.ctrl[:] = out.ctrl
+        raw, sd, peg_log, peg_q = self.sensors.raw, data.sensordata, self.peg_qpos, self._peg_q
+        step = mujoco.mj_step if self.guard is None else self.guard.step
+        for i in range(self.decimation):
+            step(model, data)
+            raw[i] = sd
+            peg_log[i] = peg_q
+        self.steps += self.decimation
+
+    def _monitor(self, state: ControlState) -> tuple[list[float], list[float], EpisodeFailure | None]:
+        """Reduce the period's sensors, observe the peg and run the monitors."""
+        data, sensors = self.data, self.sensors
+        forces, pens = sensors.reduce()
+        block = sensors.force_sq[:, BLOCK_PEG]
+        np.sqrt(block, out=self._block_force)
+        peg = self.peg = self.reader.peg(data, float(self._block_force[-1]), self._half_length)
+        try:
+            self.divergence.check(data, state.t)
+            self.history.update(float(data.time), self.model.opt.timestep, self._block_force, peg)
+            self.contact.check(forces, pens)
+            if self.grasp is not None and self.task.grasped:
+                self.grasp.check(data, state, peg)
+        except EpisodeFailure as exc:
+            return forces, pens, exc
+        return forces, pens, None
+
+    def _evaluate(self, state: ControlState) -> EpisodeFailure | None:
+        assert self.peg is not None
+        try:
+            self.last = self.task.evaluate(Observation(float(self.data.time), state, self.peg))
+        except EpisodeFailure as exc:
+            return exc
+        return None
+
+    def advance(self, seconds: float) -> Evaluation | None:
+        """Step for ``seconds`` [s] of simulated time (whole control periods, at least one), or
+        until the task is done. Failures propagate as :class:`EpisodeFailure`."""
+        evaluation = None
+        for _ in range(max(1, round(seconds / self.control_dt))):
+            evaluation = self.step()
+            if evaluation.done:
+                break
+        return evaluation
+
+    def run(self, max_steps: int) -> LoopOutcome:
+        """Step until the task is done, a failure, ``max_steps`` physics steps, or Ctrl-C."""
+        status, reason, detail = "failure", "timeout", "step limit reached"
+        try:
+            while self.steps < max_steps:
+                evaluation = self.step()
+                if evaluation.done:
+                    status = "success" if evaluation.success else "failure"
+                    reason, detail = evaluation.reason, evaluation.detail
+                    break
+        except EpisodeFailure as failure:
+            reason, detail = failure.reason, failure.detail
+            self.task.finish(float(self.data.time), failure.reason)
+        except KeyboardInterrupt:
+            self.task.finish(float(self.data.time), "interrupted")
+            return LoopOutcome("interrupted", "interrupted", "Ctrl-C", self.last)
+        if status != "success" and self.steps >= max_steps:
+            self.task.finish(float(self.data.time), "timeout")
+        return LoopOutcome(status, reason, detail, self.last)

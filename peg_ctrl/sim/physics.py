@@ -1,0 +1,206 @@
+"""Physics profiles: the solver options and the peg-block contact model, chosen by name.
+
+``seed``
+    SPEC §3 exactly: 1 ms RK4, CG with 20 noslip iterations, per-geom ``solref``/``solimp``, a
+    1 mm contact margin on the block (the hole is widened by it), a 10-sided hole and a 32-sided
+    mesh peg. Every bar measured before the profiles existed holds with it.
+
+``precision``
+    For studies in which clearance, chamfer and tilt must act as they do on real parts
+    (docs/physics.md has the measurements behind each value):
+
+    - the peg is a primitive cylinder, exact to the collider's tolerance;
+    - the hole is a polygon with as many sides as it takes to stay within
+      ``hole_roundness`` (10 µm) of the nominal radius: flats at the nominal radius, corners at
+      most 10 µm outside it;
+    - the peg's contacts with the block and the table are explicit pairs with no margin (they
+      act when the surfaces meet), a time constant of two physics steps and impedance
+      0.99..0.999, so 10 N of steady contact penetrates a few µm;
+    - those pairs use ``condim`` 3: sliding friction only. Torsional and rolling friction
+      model a contact patch, which between rigid metal parts is microns wide; the seed's 0.1 m
+      torsional coefficient (a patch ~20 cm across) resists the peg straightening in the hole;
+    - the convex collider (GJK/EPA) works to 1 nm (``ccd_tolerance``; MuJoCo's default 1 µm
+      let a flat peg end resting across the hole's convex parts report a bogus 1 mm overlap
+      now and then: a 180 N spike out of a 4 N push);
+    - the Newton solver runs to convergence (tolerance 1e-10) at a 0.5 ms step with the
+      ``implicitfast`` integrator; ``impratio`` 100 keeps the grasp without noslip, whose cost
+      grows with the square of the contact count.
+
+    - a peg-block contact deeper than 0.1 mm is a collider artifact (a flat face resting on a
+      flat face can make multiccd return a phantom contact as deep as the part is wide): that
+      step's collisions are recomputed without multiccd (``phantom_depth``; the episode counts
+      them in ``phantom_contacts``).
+
+``fast``
+    The ``seed`` contact model (geometry, margins, per-geom ``solref``/``solimp``, CG with 20
+    noslip iterations) integrated with ``implicitfast`` at a 2.5 ms step instead of RK4 at
+    1 ms: one forward pass per 2.5 ms of simulated time instead of four per millisecond.
+    MuJoCo's safety floor raises every contact time constant below two steps (the pads' 4 ms)
+    to 5 ms, so the grasp is softer. Validated against ``seed`` by ``peg-sim
+    validate-profile fast`` (docs/performance.md): what it may and may not be used for is
+    stated there.
+
+A profile changes the compiled model only: tasks, controllers and the loop do not know which
+one is in use (the control period must be a whole number of physics steps: the default 200 Hz
+is 5, 10 and 2 of them in ``seed``, ``precision`` and ``fast``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import mujoco
+
+from peg_ctrl.errors import ConfigError, UnknownComponent
+from peg_ctrl.sim.assets import AssetParams
+
+__all__ = [
+    "PegContactParams",
+    "PhysicsProfile",
+    "PhysicsConfig",
+    "PROFILES",
+    "SEED",
+    "PRECISION",
+    "FAST",
+    "profile",
+    "parts_for_roundness",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class PegContactParams:
+    """Contact parameters of the peg against each block part and the table (explicit ``pair``s)."""
+
+    condim: int = 3  # sliding friction; the coefficient is the larger of the scene's peg and
+    # block sliding frictions, as MuJoCo would mix them (SceneConfig.peg_friction/block_friction)
+    solref: tuple[float, float] = (0.001, 1.0)  # [s, damping ratio]
+    solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 1e-4, 0.5, 2.0)
+    margin: float = 0.0  # [m]
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsProfile:
+    """Solver options and the peg-block contact model. ``pair=None`` keeps the per-geom values."""
+
+    name: str
+    timestep: float  # [s]
+    integrator: str  # mjtIntegrator name without prefix: "RK4", "IMPLICITFAST", "EULER"
+    solver: str  # "CG" or "NEWTON"
+    iterations: int
+    tolerance: float
+    ls_iterations: int
+    noslip_iterations: int
+    impratio: float
+    peg_geom: str  # "mesh" (the 32-sided prism of the seed) or "cylinder" (primitive)
+    hole_roundness: float | None  # max corner deviation from the nominal radius [m]; None: n_parts
+    contact_margin: float | None  # block geoms' margin, added to the hole [m]; None: the assets'
+    pair: PegContactParams | None = None
+    ccd_tolerance: float | None = None  # convex collision (GJK/EPA) tolerance [m]; None: MuJoCo's
+    ccd_iterations: int | None = None  # ... and iteration cap; None: MuJoCo's
+    # A peg-block contact deeper than this [m] is a collider artifact, not physics: MuJoCo 4.0's
+    # multi-contact convex collision (multiccd) now and then returns a phantom contact, as deep
+    # as the part is wide, for a flat face resting on a flat face (it answers the phantom with
+    # kN). The loop then recomputes that step's collisions without multiccd (peg_ctrl.run.loop).
+    # None: no check (RK4 cannot split its step to recompute).
+    phantom_depth: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.peg_geom not in ("mesh", "cylinder"):
+            raise ConfigError(f"peg_geom must be 'mesh' or 'cylinder', got {self.peg_geom!r}")
+
+    def assets(self, params: AssetParams) -> AssetParams:
+        """The geometry this profile builds for the requested ``params``: its margin, its hole."""
+        if self.contact_margin is not None:
+            params = dataclasses.replace(params, contact_margin=self.contact_margin)
+        if self.hole_roundness is None:
+            return params
+        n = parts_for_roundness(params.hole_inradius, self.hole_roundness)
+        return dataclasses.replace(params, n_parts=n)
+
+    def apply_options(self, opt: mujoco.MjOption) -> None:
+        opt.timestep = self.timestep
+        opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator}")
+        opt.solver = getattr(mujoco.mjtSolver, f"mjSOL_{self.solver}")
+        opt.iterations = self.iterations
+        opt.tolerance = self.tolerance
+        opt.ls_iterations = self.ls_iterations
+        opt.noslip_iterations = self.noslip_iterations
+        opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        opt.impratio = self.impratio
+        if self.ccd_tolerance is not None:
+            opt.ccd_tolerance = self.ccd_tolerance
+        if self.ccd_iterations is not None:
+            opt.ccd_iterations = self.ccd_iterations
+
+
+def parts_for_roundness(inradius: float, tolerance: float) -> int:
+    """Fewest polygon sides whose corners lie within ``tolerance`` [m] outside the ``inradius``."""
+    if not (math.isfinite(tolerance) and tolerance > 0.0):
+        raise ConfigError(f"hole roundness tolerance must be > 0 m, got {tolerance!r}")
+    if not (math.isfinite(inradius) and inradius > 0.0):
+        raise ConfigError(f"hole inradius must be > 0 m, got {inradius!r}")
+    n = math.ceil(math.pi / math.acos(inradius / (inradius + tolerance)))
+    while inradius / math.cos(math.pi / n) - inradius > tolerance:  # guard the rounding
+        n += 1
+    return max(n, 4)
+
+
+SEED = PhysicsProfile(
+    name="seed",
+    timestep=0.001,
+    integrator="RK4",
+    solver="CG",
+    iterations=100,
+    tolerance=1e-8,
+    ls_iterations=50,
+    noslip_iterations=20,
+    impratio=10.0,
+    peg_geom="mesh",
+    hole_roundness=None,
+    contact_margin=None,
+)
+
+PRECISION = PhysicsProfile(
+    name="precision",
+    timestep=0.0005,
+    integrator="IMPLICITFAST",
+    solver="NEWTON",
+    iterations=100,
+    tolerance=1e-10,
+    ls_iterations=50,
+    noslip_iterations=0,
+    impratio=100.0,
+    peg_geom="cylinder",
+    hole_roundness=10e-6,
+    contact_margin=0.0,
+    pair=PegContactParams(),
+    ccd_tolerance=1e-9,
+    ccd_iterations=100,
+    phantom_depth=1e-4,  # 100 um: contacts here penetrate a few um at 10 N
+)
+
+FAST = dataclasses.replace(SEED, name="fast", timestep=0.0025, integrator="IMPLICITFAST")
+
+PROFILES: dict[str, PhysicsProfile] = {p.name: p for p in (SEED, PRECISION, FAST)}
+
+
+def profile(name_or_profile: str | PhysicsProfile, *, where: str = "physics.profile") -> PhysicsProfile:
+    """The profile called ``name`` (or the profile itself); an unknown name lists the known,
+    naming the field or flag ``where`` it came from."""
+    if isinstance(name_or_profile, PhysicsProfile):
+        return name_or_profile
+    try:
+        return PROFILES[name_or_profile]
+    except KeyError:
+        raise UnknownComponent("physics profile", name_or_profile, PROFILES, where=where) from None
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsConfig:
+    """``physics.profile``: which :class:`PhysicsProfile` builds the scene."""
+
+    profile: str = "seed"
+
+    def __post_init__(self) -> None:
+        profile(self.profile)

@@ -1,0 +1,471 @@
+"""Experiment files, sweeps (resume, worker-count invariance), statistics and reports."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from peg_ctrl.experiments.config import expand, experiment_from_mapping, load_experiment
+from peg_ctrl.experiments.report import wilson_interval
+from peg_ctrl.experiments.runner import _done, run_sweep
+from peg_ctrl.run.episode import WALL_CLOCK_FIELDS
+from peg_ctrl.tasks.monitors import END_STATES
+
+from ..conftest import sigint_default
+
+CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
+SMALL = """\
+name: small
+controllers: [{name: pd}, {name: impedance, k_pos: [1200.0, 1200.0, 1200.0]}]
+clearances: [0.001]
+seeds: [0, 1]
+max_steps: 4000
+"""
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in row.items() if k not in WALL_CLOCK_FIELDS} for row in csv.DictReader(fh)]
+
+
+def test_shipped_experiments_load() -> None:
+    for path in sorted(CONFIGS.glob("*.yaml")):
+        exp = load_experiment(path)
+        assert len(expand(exp)) >= 20, path
+    quick = load_experiment(CONFIGS / "quick.yaml")
+    assert {c.name for c in quick.controllers} == {"pd", "impedance", "admittance", "diffik", "mpc"}
+    clearance = load_experiment(CONFIGS / "clearance.yaml")
+    assert min(clearance.clearances) == pytest.approx(5e-5) and max(clearance.clearances) >= 1e-3
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("controllers: [{name: lqg}]", "controllers[0]: unknown controller 'lqg'; known: admittance, diffik"),
+        ("controllers: [pd]\nclearances: [-0.002]", "clearances[0]: clearance must be > -0.001 m"),
+        ("clearances: [0.001]", "controllers: missing field"),
+        ("controllers: [pd]\nseeds: many", "seeds: expected a list"),
+        ("controllers: [{name: pd, kp_pos: fast}]", "controllers[0].kp_pos: expected a number"),
+        ("controllers: [pd]\nplanners: [rrt]", "planners[0]: unknown planner 'rrt'"),
+        (
+            "controllers: [pd]\ndomain: {friction_scale: [1.2, 0.8]}",
+            "domain.friction_scale must be [low, high]",
+        ),
+        ("controllers: [pd]\nwarp: 9", "warp: unknown field"),
+    ],
+)
+def test_bad_experiment_files_fail_in_one_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text + "\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "sweep", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("peg-sim: error: ") and message in lines[0], lines
+
+
+def test_jobs_are_keyed_by_their_full_config() -> None:
+    exp = experiment_from_mapping(
+        {"controllers": ["pd", "impedance"], "seeds": 3, "clearances": [0.001, 0.0005]}
+    )
+    jobs = expand(exp)
+    assert len(jobs) == 12 and len({j.key for j in jobs}) == 12
+    assert [j.key for j in jobs] == [j.key for j in expand(exp)]
+
+
+def test_report_handles_all_successes(tmp_path: Path) -> None:
+    """A 100 % group has a Wilson upper bound a hair below 1: the plot must still draw."""
+    from peg_ctrl.experiments.report import _plots, summarise
+
+    rows = [
+        {
+            "controller": "pd",
+            "planner": "ruckig",
+            "clearance_m": c,
+            "status": "success",
+            "reason": "",
+            "phase": "",
+            "peak_contact_force_n": 0.0,
+            "time_to_insert_s": 9.0,
+            "log_path": "episodes/x/log.jsonl",
+        }
+        for c in (0.001, 0.0001)
+        for _ in range(10)
+    ]
+    names = [name for _, name in _plots(tmp_path, rows, summarise(rows))]
+    assert "success_vs_clearance.png" in names and (tmp_path / "success_vs_clearance.png").is_file()
+
+
+@pytest.mark.parametrize("n", [5, 10, 20])
+def test_success_vs_disturbance_handles_all_successes(tmp_path: Path, n: int) -> None:
+    """5/5 has a Wilson upper bound a round-off below 1: the error bars must still draw."""
+    from peg_ctrl.experiments.report import _plots, summarise
+
+    rows = [
+        {
+            "arm": "pd/spiral",
+            "controller": "pd",
+            "task": "pick_and_place",
+            "planner": "ruckig",
+            "clearance_m": 0.0001,
+            "status": "success",
+            "reason": "",
+            "phase": "",
+            "peak_contact_force_n": 5.0,
+            "time_to_insert_s": 4.0,
+            "log_path": "episodes/x/log.jsonl",
+            "task.lateral_error": e,
+        }
+        for e in (0.0005, 0.003)
+        for _ in range(n)
+    ]
+    names = [name for _, name in _plots(tmp_path, rows, summarise(rows))]
+    assert "success_vs_disturbance.png" in names and (tmp_path / "success_vs_disturbance.png").is_file()
+
+
+def test_wilson_interval() -> None:
+    lo, hi = wilson_interval(19, 20)
+    assert lo == pytest.approx(0.7639, abs=1e-3) and hi == pytest.approx(0.9911, abs=1e-3)
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_interrupted_sweep_resumes_to_the_same_results(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL)
+    # Uninterrupted, with two workers.
+    run_sweep(load_experiment(config), tmp_path / "whole", workers=2, progress=False)
+    # Interrupted with Ctrl-C after the first finished episode, then resumed with one worker.
+    out = tmp_path / "resumed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "peg_ctrl", "sweep", str(config), "--out", str(out), "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=sigint_default,  # interrupted below
+    )
+    # Interrupt once an episode is done as the runner counts it (its final summary written: the
+    # first summary, written the moment the episode ends, is not yet "done").
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(
+        _done(p.parent) for p in out.glob("episodes/*/summary.json")
+    ):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=60)
+    finished = sum(_done(p.parent) for p in out.glob("episodes/*/summary.json"))
+    assert 1 <= finished < 4, "the interruption came too late to test resuming"
+    rows = run_sweep(load_experiment(config), out, workers=1, progress=False)
+    assert len(rows) == 4
+    assert _rows(out / "episodes.csv") == _rows(tmp_path / "whole" / "episodes.csv")
+    summary = list(csv.DictReader(open(out / "summary.csv")))
+    assert [s["controller"] for s in summary] == ["pd", "impedance"]
+    report = (out / "report.md").read_text()
+    assert "## Summary" in report and "peak_force.png" in report
+    assert (out / "episodes.parquet").stat().st_size > 0
+
+
+def test_a_different_experiment_in_the_same_directory_is_refused(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 100"))
+    run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False, report=False)
+    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 101"))
+    with pytest.raises(ValueError, match="different experiment"):
+        run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False)
+
+
+def test_plot_redraws_the_report(tmp_path: Path) -> None:
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 100"))
+    out = tmp_path / "out"
+    run_sweep(load_experiment(config), out, workers=1, progress=False, report=False)
+    assert not (out / "report.md").exists()
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "plot", str(out)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    for name in ("report.md", "force_profiles.png", "peak_force.png", "failures.png"):
+        assert (out / name).stat().st_size > 0
+    # One clearance: a success-vs-clearance plot would be one point per arm, so there is none.
+    assert not (out / "success_vs_clearance.png").exists()
+
+
+def test_ray_backend_gives_the_local_results(tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="the ray extra is not installed (pip install 'peg-ctrl[ray]')")
+    import ray
+
+    config = tmp_path / "small.yaml"
+    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 600"))
+    exp = load_experiment(config)
+    run_sweep(exp, tmp_path / "local", workers=2, progress=False, report=False)
+    try:
+        run_sweep(exp, tmp_path / "ray", workers=2, backend="ray", progress=False, report=False)
+    finally:
+        ray.shutdown()
+    assert _rows(tmp_path / "ray" / "episodes.csv") == _rows(tmp_path / "local" / "episodes.csv")
+
+
+def test_tuple_gains_with_gain_scale_run_to_a_report(tmp_path: Path) -> None:
+    """Once a crash: list-valued gains perturbed by domain.gain_scale."""
+    config = tmp_path / "crash.yaml"
+    config.write_text(
+        "controllers: [{name: impedance, k_pos: [1200, 1200, 1200]}]\n"
+        "domain: {gain_scale: [0.9, 1.1]}\nseeds: 1\nmax_steps: 3000\n"
+    )
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", "sweep", str(config), "--out", str(out), "--workers", "1"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    (row,) = _rows(out / "episodes.csv")
+    assert row["controller"] == "impedance" and float(row["gain_scale"]) != 1.0
+    assert 0.9 <= float(row["gain_scale"]) <= 1.1
+    assert (out / "summary.csv").is_file() and "## Summary" in (out / "report.md").read_text()
+
+
+# -- contact studies: strategies and grids -----------------------------------------------------
+def test_contact_comparison_crosses_controllers_strategies_and_the_grid() -> None:
+    exp = load_experiment(CONFIGS / "contact.yaml")
+    jobs = expand(exp)
+    arms = list(dict.fromkeys(j.arm for j in jobs))
+    assert len(arms) == len(exp.controllers) * len(exp.strategies) >= 5
+    assert "pd/straight" in arms and "impedance/spiral" in arms
+    cells = list(dict.fromkeys(tuple(sorted(j.cell.items())) for j in jobs))
+    assert len(cells) == 6
+    assert len(jobs) == len(arms) * 6 * len(exp.seeds) and len({j.key for j in jobs}) == len(jobs)
+    job = next(j for j in jobs if j.arm == "impedance/tilt" and j.cell["task.lateral_error"] == 0.003)
+    cfg = job.config
+    assert cfg.task.name == "held_insertion" and cfg.task.strategy == "tilt"  # type: ignore[attr-defined]
+    assert cfg.task.lateral_error == 0.003  # type: ignore[attr-defined]
+    assert cfg.scene.assets.clearance == 0.0001 and cfg.scene.assets.chamfer == 0.001
+    assert cfg.physics.profile == "precision"
+
+
+def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
+    from peg_ctrl.config import read_mapping
+    from peg_ctrl.experiments.config import apply_experiment_overrides
+
+    data = apply_experiment_overrides(
+        read_mapping(CONFIGS / "contact.yaml"), ["task.lateral_error=0.002", "seeds=40"]
+    )
+    exp = experiment_from_mapping(data)
+    jobs = expand(exp)
+    assert {j.config.task.lateral_error for j in jobs} == {0.002}  # type: ignore[attr-defined]
+    assert len(exp.seeds) == 40 and len(jobs) == len(exp.controllers) * len(exp.strategies) * 2 * 40
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
+            "strategies[0]: must be one of straight, force, spiral, tilt, align, got 'poke'",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",
+            "grid.task.wobble: no such field in the episode config",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.lateral_error: [-1]}",
+            "task.lateral_error must be >= 0, got -1",
+        ),
+        ("controllers: [pd]\ngrid: {seed: [1, 2]}", "grid.seed: sweep this with controllers/strategies"),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.tilt_error: [0.01, 0.01]}",
+            "grid.task.tilt_error: repeated values [0.01, 0.01]",
+        ),
+        (
+            "controllers: [pd]\ngrid: {scene.assets.clearance: [0.001]}",
+            "grid.scene.assets.clearance: sweep this with controllers/strategies/planners/clearances",
+        ),
+        (
+            "controllers: [pd]\nphysics: {profile: precision}\nscene: {assets: {n_parts: 12}}",
+            "scene.assets.n_parts",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {mpc: [spiral]}",
+            "arms.mpc: no such controller; the controllers are pd",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {pd: [tilt]}",
+            "arms.pd: 'tilt' is not one of the experiment's strategies (spiral)",
+        ),
+        (
+            "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [spiral]\narms: {pd: []}",
+            "arms.pd: expected a non-empty list of strategies, got []",
+        ),
+        ("controllers: [pd]\nscene: {friction: -0.2}", "friction must be finite and > 0"),
+    ],
+)
+def test_bad_contact_studies_fail_in_one_line(text: str, message: str) -> None:
+    import yaml
+
+    from peg_ctrl.config import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        experiment_from_mapping(yaml.safe_load(text))
+    assert message in str(err.value)
+
+
+def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path: Path) -> None:
+    exp = experiment_from_mapping(
+        {
+            "name": "tiny",
+            "controllers": ["pd"],
+            "strategies": ["straight", "spiral"],
+            "clearances": [0.0001],
+            "seeds": 2,
+            "max_steps": 6000,
+            "task": {"name": "held_insertion"},
+            "scene": {"assets": {"chamfer": 0.001}},
+            "physics": {"profile": "precision"},
+            "grid": {"task.lateral_error": [0.0005, 0.002]},
+        }
+    )
+    rows = run_sweep(exp, tmp_path, workers=2, progress=False)
+    assert len(rows) == 8
+    header = (tmp_path / "episodes.csv").read_text().splitlines()[0].split(",")
+    for column in (
+        "arm",
+        "strategy",
+        "task.lateral_error",
+        "first_contact_s",
+        "contact_to_seat_s",
+        "contact_impulse_ns",
+        "max_tilt_rad",
+        "search_distance_m",
+        "end_state",
+        "lateral_error_m",
+        "tilt_rad",
+        "insertion_depth_m",
+        "peak_any_contact_force_n",
+        "max_penetration_m",
+        "sim_time_s",
+    ):
+        assert column in header, column
+    assert {r["arm"] for r in rows} == {"pd/straight", "pd/spiral"}
+    assert all(r["end_state"] in END_STATES for r in rows)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Success per grid cell" in report and "## Which arms differ" in report
+    for name in ("success_vs_disturbance.png", "force_vs_depth.png", "peak_force.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+
+
+# -- the report from episodes.csv alone -----------------------------------------------------------
+def _contact_rows() -> list[dict]:
+    """Two arms x two lateral errors x 8 seeds; the friction drawn per seed; no traces."""
+    rows = []
+    for arm, wins_at in (("pd/spiral", {0.0005: 8, 0.003: 2}), ("impedance/spiral", {0.0005: 8, 0.003: 7})):
+        for error, wins in wins_at.items():
+            for seed in range(8):
+                ok = seed < wins
+                rows.append(
+                    {
+                        "key": f"{arm}-{error}-{seed}",
+                        "arm": arm,
+                        "controller": arm.split("/")[0],
+                        "task": "held_insertion",
+                        "strategy": "spiral",
+                        "planner": "ruckig",
+                        "clearance_m": "0.0001",
+                        "seed": str(seed),
+                        "friction_scale": str(0.8 + 0.05 * seed),
+                        "gain_scale": "1.0",
+                        "status": "success" if ok else "failure",
+                        "reason": "" if ok else "wedged",
+                        "phase": "push" if ok else "search",
+                        "peak_contact_force_n": str(10.0 + seed + (20.0 if arm.startswith("pd") else 0.0)),
+                        "time_to_insert_s": "4.0" if ok else "",
+                        "contact_to_seat_s": "3.0" if ok else "",
+                        "log_path": f"episodes/{arm}-{error}-{seed}/log.jsonl",
+                        "task.lateral_error": str(error),
+                        "task.tilt_error": "0.0",
+                    }
+                )
+    return rows
+
+
+def _write_csv(out: Path, rows: list[dict]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "episodes.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_swept_conditions_are_the_varied_columns() -> None:
+    from peg_ctrl.experiments.report import swept_conditions
+    from peg_ctrl.experiments.stats import episodes_frame
+
+    # Constant: the clearance, the tilt, the gain scale; varied: the lateral error, the friction.
+    assert swept_conditions(episodes_frame(_contact_rows())) == ["task.lateral_error", "friction_scale"]
+
+
+def test_success_table_counts_per_arm_and_level_with_wilson_intervals() -> None:
+    from peg_ctrl.experiments.report import _success_table
+    from peg_ctrl.experiments.stats import episodes_frame
+
+    df = episodes_frame(_contact_rows())
+    df["won"] = df["status"] == "success"
+    table = _success_table(df, "task.lateral_error")
+    row = table[(table["arm"] == "pd/spiral") & (table["x"] == 0.003)].iloc[0]
+    assert (row["k"], row["n"], row["rate"]) == (2, 8, 0.25)
+    assert (row["low"], row["high"]) == wilson_interval(2, 8)
+    assert len(table) == 4 and not table.attrs["binned"]
+    # Eight friction values (one per seed): four quartile bins per arm, at the bins' medians.
+    friction = _success_table(df, "friction_scale")
+    assert friction.attrs["binned"] and len(friction) == 8
+    assert friction.groupby("arm")["n"].sum().tolist() == [16, 16]
+    assert friction["x"].iloc[0] == pytest.approx(0.825)  # the median of 0.80 and 0.85
+
+
+def test_a_report_from_episodes_csv_alone_leaves_out_the_trace_plots(tmp_path: Path) -> None:
+    """Without the episodes' traces, no blank per-arm panels: the trace plots are left out."""
+    from peg_ctrl.experiments.report import write_report
+
+    _write_csv(tmp_path, _contact_rows())
+    report = write_report(tmp_path).read_text()
+    for name in ("success_vs_disturbance.png", "peak_force.png", "failures.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+        assert f"({name})" in report
+    for name in ("force_profiles.png", "force_vs_depth.png", "success_vs_clearance.png"):
+        assert not (tmp_path / name).exists(), name
+    assert "force traces (`episodes/<key>/forces.npz`) are not in this directory" in report
+    assert "| pd/spiral | 8/8, 33.5 N | 2/8, 33.5 N |" in report  # the grid-cell table
+
+
+def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction() -> None:
+    exp = load_experiment(CONFIGS / "contact_hard.yaml")
+    jobs = expand(exp)
+    arms = list(dict.fromkeys(j.arm for j in jobs))
+    assert arms == [
+        "pd/straight",
+        "pd/spiral",
+        "pd/align",
+        "impedance/spiral",
+        "impedance/align",
+        "admittance/spiral",
+        "admittance/align",
+        "mpc/align",
+        "diffik/align",
+        "sampling_mpc/align",
+    ]
+    cells = {tuple(sorted(j.cell.items())) for j in jobs}
+    assert len(cells) == 8 and {c[0] for c in cells} == {("scene.friction", 0.3), ("scene.friction", 0.9)}
+    assert len(jobs) == len(arms) * 8 * len(exp.seeds) == 400
+    job = next(j for j in jobs if j.arm == "mpc/align" and j.cell["scene.friction"] == 0.9)
+    assert job.config.scene.friction == 0.9 and job.config.scene.assets.clearance == 0.00005
+    assert job.config.controller.formulation == "contact"  # type: ignore[attr-defined]

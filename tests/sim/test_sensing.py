@@ -1,0 +1,67 @@
+"""The wrist's contact wrench: free space reads nothing, a push reads the push, a tare removes a bias."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from peg_ctrl.commands import euler_to_quat
+from peg_ctrl.controllers import make_controller
+from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.sensing import WristModel, WristSensor, lowpass_alpha
+
+from ..conftest import HOME, target
+
+
+def test_lowpass_alpha() -> None:
+    assert lowpass_alpha(20.0, 0.001) == pytest.approx(1.0 - np.exp(-2.0 * np.pi * 0.02))
+    assert 0.0 < lowpass_alpha(5.0, 0.001) < lowpass_alpha(20.0, 0.001) < 1.0
+
+
+def test_free_space_reads_no_contact(model: mujoco.MjModel) -> None:
+    tracker = Tracker(model, make_controller("pd", model, control_dt=0.001))
+    tracker.hold(target(HOME, euler_to_quat(0.3, -0.2, 0.5)), 1.5)
+    f, tau = WristModel(model).contact_wrench(tracker.state(), np.array([0.0, -0.07, -0.01]), np.zeros(3))
+    assert np.linalg.norm(f) < 0.05 and np.linalg.norm(tau) < 0.01
+
+
+def test_a_push_below_the_sensor_reads_as_the_push(model: mujoco.MjModel) -> None:
+    """5 N applied to the hand below the sensor: the contact force on the hand is that force,
+    and its moment about the point it is applied at (the body's centre of mass) is zero."""
+    tracker = Tracker(model, make_controller("pd", model, control_dt=0.001))
+    tracker.hold(target(HOME), 0.5)
+    body = model.body("2f85/base").id
+    tracker.data.xfrc_applied[body, :3] = [3.0, 0.0, -4.0]
+    tracker.hold(target(HOME), 1.0)
+    state = tracker.state()
+    wrist = WristModel(model)
+    f, _ = wrist.contact_wrench(state, np.zeros(3), np.zeros(3))
+    np.testing.assert_allclose(f, [3.0, 0.0, -4.0], atol=0.15)
+    com_body = np.empty(3)  # where xfrc_applied acts, in the gripper frame from the pinch point
+    q_inv = np.array([state.quat_world[0], *(-state.quat_world[1:])])
+    mujoco.mju_rotVecQuat(com_body, tracker.data.xipos[body] - state.p_world, q_inv)
+    _, tau = wrist.contact_wrench(state, com_body, np.zeros(3))
+    assert np.linalg.norm(tau) < 0.01
+
+
+def test_the_tare_removes_a_bias_and_moment_about_moves_the_point(model: mujoco.MjModel) -> None:
+    tracker = Tracker(model, make_controller("pd", model, control_dt=0.001))
+    tracker.hold(target(HOME), 0.5)
+    state = tracker.state()
+    biased = state._replace(ft_wrench=state.ft_wrench + np.array([0.3, 0.0, 0.2, 0.004, 0.0, 0.0]))
+    sensor = WristSensor(model, centre_body=np.array([0.0, -0.07, -0.01]), dt=0.001, tare_time=0.05)
+    sensor.reset(biased)
+    for _ in range(50):
+        sensor.accumulate_tare(biased)
+    f, tau = sensor.raw(biased)
+    assert np.linalg.norm(f) < 1e-9 and np.linalg.norm(tau) < 1e-9
+    f, tau = sensor.raw(state)  # the bias is gone: the unbiased reading is its negative
+    assert np.linalg.norm(f) == pytest.approx(np.linalg.norm([0.3, 0.0, 0.2]), rel=0.05)
+    sensor.force[:] = [0.0, 0.0, 2.0]
+    sensor.moment[:] = 0.0
+    # The same force about a point 10 mm away along the gripper's x has a moment r x F.
+    moved = sensor.moment_about(state, np.array([0.01, -0.07, -0.01]))
+    offset = np.empty(3)
+    mujoco.mju_rotVecQuat(offset, np.array([-0.01, 0.0, 0.0]), state.quat_world)
+    np.testing.assert_allclose(moved, np.cross(offset, [0.0, 0.0, 2.0]), atol=1e-12)
