@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from peg_ctrl.cli.common import PROFILES, add_out
+from peg_ctrl.cli.common import PROFILES, add_known, add_out
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.io import lock_output_dir, prepare_output_dir
 
@@ -18,21 +18,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "peak force, slip and speed; writes DIR/validation.json and DIR/validation.md. Exit code 1 if "
         "a check fails.",
     )
-    p.add_argument(
-        "profile",
-        type=PROFILES,
-        choices=PROFILES,
-        metavar="PROFILE",
-        help="the profile to validate: %(choices)s",
-    )
-    p.add_argument(
-        "--reference",
-        default="seed",
-        type=PROFILES,
-        choices=PROFILES,
-        metavar="PROFILE",
-        help="the reference profile (default %(default)s)",
-    )
+    add_known(p, "profile", PROFILES, "the profile to validate: %(choices)s", metavar="PROFILE")
+    reference = "the reference profile (default %(default)s)"
+    add_known(p, "--reference", PROFILES, reference, default="seed", metavar="PROFILE")
     p.add_argument("--seeds", type=int, default=100, help="seeds per task and profile (default 100)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     add_out(p, help="output directory (default runs/validate-<profile>)")

@@ -21,6 +21,7 @@ Overhead = loop time / replay time - 1, the median of the paired ratios of the r
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import platform
@@ -497,14 +498,6 @@ def _time_effort(controller: Any, errors: list[np.ndarray], times: list[float], 
     controller.reset_warm_start()
     for z0 in errors:
         t0 = time.perf_counter()
-        with _quiet_stdout() if quiet else _nothing():
+        with _quiet_stdout() if quiet else contextlib.nullcontext():
             controller.solve(z0, np.zeros(6), np.zeros(6))
         times.append(time.perf_counter() - t0)
-
-
-class _nothing:
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None
