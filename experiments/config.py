@@ -19,7 +19,8 @@ A contact study (see ``experiments/configs/contact.yaml``) names a task family a
 strategies and disturbances as well::
 
     task: {name: held_insertion, position_noise: 0.0}
-    strategies: [straight, spiral, tilt]   # task.strategy, crossed with the controllers
+    strategies: [straight, spiral, tilt]   # task.strategy, crossed with the controllers (a name,
+                                            # or {name: spiral, spiral_pitch: 0.001})
     scene: {assets: {chamfer: 0.001}}       # the base scene (clearances still sweep clearance)
     grid:                                   # any dotted episode-config keys, crossed
       task.lateral_error: [0.0005, 0.0015, 0.003]
@@ -47,8 +48,8 @@ from peg_ctrl.sim.assets import AssetParams
 from peg_ctrl.sim.physics import PhysicsConfig
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import TaskSpec
-from peg_ctrl.tasks.held_insertion import STRATEGIES
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig
+from peg_ctrl.tasks.strategies import StrategyConfig, strategy_name
 
 __all__ = ["ExperimentConfig", "Job", "load_experiment", "expand", "cells", "apply_experiment_overrides"]
 
@@ -66,7 +67,9 @@ class ExperimentConfig:
     task: TaskSpec = TaskConfig()
     success: SuccessConfig = SuccessConfig()
     physics: PhysicsConfig = PhysicsConfig()
-    strategies: tuple[str, ...] = ()  # task.strategy values to cross; empty: the task's own
+    # task.strategy values to cross (names, or mappings with their fields); empty: the task's own.
+    # A bare name that the task's own strategy has keeps the task's fields for it.
+    strategies: tuple[StrategyConfig, ...] = ()
     # Which strategies each controller (by its label: its name, unless it appears twice) meets;
     # a controller not listed meets every one of ``strategies``.
     arms: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -97,17 +100,13 @@ class ExperimentConfig:
         if self.max_steps is not None and self.max_steps < 1:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.strategies:
-            if not hasattr(self.task, "strategy"):
+            if not strategy_name(self.task):
                 raise ConfigError(
                     f"strategies: task {self.task.name!r} has no strategy; use task: {{name: held_insertion}}"
                 )
-            for i, name in enumerate(self.strategies):
-                if name not in STRATEGIES:
-                    raise ConfigError(
-                        f"strategies[{i}]: must be one of {', '.join(STRATEGIES)}, got {name!r}"
-                    )
-            if len(set(self.strategies)) != len(self.strategies):
-                raise ConfigError("strategies: repeated strategies")
+            names = self.strategy_names
+            if len(set(names)) != len(names):
+                raise ConfigError(f"strategies: repeated strategies {names}")
         self._check_arms()
         for key, values in self.grid.items():
             if not isinstance(key, str) or not key:
@@ -122,7 +121,11 @@ class ExperimentConfig:
                 raise ConfigError(f"grid.{key}: repeated values {values!r}")
         # Every grid cell must make a valid episode config (and the scene must suit the physics).
         base = _episode(
-            self, self.controllers[0], (self.strategies or ("",))[0], self.planners[0], self.clearances[0]
+            self,
+            self.controllers[0],
+            self.strategies[0] if self.strategies else None,
+            self.planners[0],
+            self.clearances[0],
         )
         for cell in cells(self):
             _apply_cell(base, cell)
@@ -139,16 +142,21 @@ class ExperimentConfig:
             if not isinstance(chosen, list) or not chosen:
                 raise ConfigError(f"arms.{label}: expected a non-empty list of strategies, got {chosen!r}")
             for name in chosen:
-                if name not in self.strategies:
+                if name not in self.strategy_names:
                     raise ConfigError(
                         f"arms.{label}: {name!r} is not one of the experiment's strategies "
-                        f"({', '.join(self.strategies)})"
+                        f"({', '.join(self.strategy_names)})"
                     )
 
-    def strategies_for(self, label: str) -> tuple[str, ...]:
+    @property
+    def strategy_names(self) -> list[str]:
+        """The names of ``strategies``, in order."""
+        return [s.name for s in self.strategies]
+
+    def strategies_for(self, label: str) -> tuple[StrategyConfig, ...]:
         """The strategies the controller labelled ``label`` meets, in ``strategies``' order."""
         chosen = self.arms.get(label)
-        return tuple(s for s in self.strategies if chosen is None or s in chosen)
+        return tuple(s for s in self.strategies if chosen is None or s.name in chosen)
 
 
 _NOT_IN_GRID = ("controller", "seed", "planner", "task.strategy", "task.name", "scene.assets.clearance")
@@ -232,10 +240,18 @@ def experiment_from_mapping(data: dict[str, Any], *, default_name: str = "experi
 
 
 def _episode(
-    exp: ExperimentConfig, spec: ControllerConfig, strategy: str, planner: str, clearance: float
+    exp: ExperimentConfig,
+    spec: ControllerConfig,
+    strategy: StrategyConfig | None,
+    planner: str,
+    clearance: float,
 ) -> EpisodeConfig:
     """The episode config of one arm, planner and clearance, before the grid cell and the seed."""
-    task = dataclasses.replace(exp.task, strategy=strategy) if strategy else exp.task  # type: ignore[call-arg]
+    task = exp.task
+    if strategy is not None:
+        keeps_own = strategy_name(task) == strategy.name and strategy == type(strategy)()
+        if not keeps_own:
+            task = dataclasses.replace(task, strategy=strategy)  # type: ignore[call-arg]
     scene = dataclasses.replace(exp.scene, assets=dataclasses.replace(exp.scene.assets, clearance=clearance))
     return EpisodeConfig(
         controller=spec,
@@ -256,22 +272,21 @@ def expand(exp: ExperimentConfig) -> list[Job]:
     jobs = []
     for spec in exp.controllers:
         label = _controller_label(spec, exp.controllers)
-        strategies = (
-            exp.strategies_for(label) if exp.strategies else (str(getattr(exp.task, "strategy", "")),)
+        strategies: tuple[StrategyConfig | None, ...] = (
+            exp.strategies_for(label) if exp.strategies else (None,)
         )
         for strategy in strategies:
             for planner in exp.planners:
                 for clearance in exp.clearances:
                     base = _episode(exp, spec, strategy, planner, clearance)
+                    name = strategy_name(base.task)
                     for cell in cells(exp):
                         cell_cfg = _apply_cell(base, cell)
                         for seed in exp.seeds:
                             cfg = dataclasses.replace(cell_cfg, seed=seed)
                             blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
                             key = hashlib.sha256(blob).hexdigest()[:16]
-                            jobs.append(
-                                Job(key, spec.name, label, planner, clearance, seed, cfg, strategy, cell)
-                            )
+                            jobs.append(Job(key, spec.name, label, planner, clearance, seed, cfg, name, cell))
     if len({j.key for j in jobs}) != len(jobs):
         raise ConfigError("the experiment lists the same episode twice (repeated controllers or clearances?)")
     return jobs

@@ -57,6 +57,7 @@ _MOVED = {
     **{m: f"run.{m}" for m in ("tracker", "workers")},
     **{m: f"tools.{m}" for m in ("bench", "profile_check", "replay", "validity_report")},
     "monitors": "tasks.monitors",
+    "tasks.hop_search": "tasks.strategies.hop_search",
     "gym_env": "gym.env",
     "teleop_window": "cli.teleop_window",
 }

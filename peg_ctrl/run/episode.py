@@ -51,6 +51,7 @@ from peg_ctrl.sim.scene import SceneConfig, build_model, check_scene
 from peg_ctrl.tasks.base import TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
+from peg_ctrl.tasks.strategies import strategy_name
 from peg_ctrl.timing import control_decimation
 
 __all__ = [
@@ -582,7 +583,7 @@ def _result(
         planner=cfg.planner,
         physics=cfg.physics.profile,
         task=cfg.task.name,
-        strategy=str(getattr(cfg.task, "strategy", "")),
+        strategy=strategy_name(cfg.task),
         seed=cfg.seed,
         total_timesteps=loop.steps,
         sim_time_s=float(loop.data.time),

@@ -28,7 +28,7 @@ from peg_ctrl.sim.rotations import cross, rotate, rotate_inv
 from peg_ctrl.sim.scene import FT_SITE, HOME_KEY
 from peg_ctrl.sim.state import ControlState, ft_world
 
-__all__ = ["WristModel", "WristSensor", "lowpass_alpha"]
+__all__ = ["ContactSense", "WristModel", "WristSensor", "lowpass_alpha"]
 
 _Vec = NDArray[np.float64]
 
@@ -135,3 +135,29 @@ class WristSensor:
         """The filtered moment moved to another point of the gripper frame [N m], world."""
         q = state.quat_world
         return self.moment + cross(rotate(q, self.centre_body) - rotate(q, point_body), self.force)
+
+
+class ContactSense:
+    """The contact force on the hand from the mount's force/torque sensor: the reading minus its
+    mean while tared (:meth:`accumulate_tare`), sign-flipped, low-passed at ``hz``, world frame.
+
+    Attributes:
+        tare: (3,) The mean reading while tared, world frame [N].
+        force: (3,) The filtered contact force on the hand [N].
+    """
+
+    def __init__(self, control_dt: float = 0.001, hz: float = 30.0) -> None:
+        self.alpha = 1.0 - math.exp(-2.0 * math.pi * hz * control_dt)
+        self.tare = np.zeros(3)
+        self._tare_sum = np.zeros(3)
+        self._tare_n = 0
+        self.force = np.zeros(3)
+
+    def accumulate_tare(self, state: ControlState) -> None:
+        self._tare_sum += ft_world(state)[0]
+        self._tare_n += 1
+        self.tare = self._tare_sum / self._tare_n
+
+    def update(self, state: ControlState) -> None:
+        contact = -(ft_world(state)[0] - self.tare)
+        self.force += self.alpha * (contact - self.force)

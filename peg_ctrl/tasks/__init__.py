@@ -4,9 +4,10 @@
 """
 
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, Task, TaskContext, TaskSpec
-from peg_ctrl.tasks.held_insertion import STRATEGIES, HeldInsertionConfig, HeldInsertionTask
+from peg_ctrl.tasks.held_insertion import HeldInsertionConfig, HeldInsertionTask
 from peg_ctrl.tasks.phases import DONE, PhaseMachine, PhaseSpec, Timeout
 from peg_ctrl.tasks.pick_and_place import PickAndPlaceConfig, PickAndPlaceTask
+from peg_ctrl.tasks.strategies import STRATEGIES, StrategyConfig, register_strategy
 from peg_ctrl.tasks.tracking import TrackingTask
 
 __all__ = [
@@ -18,6 +19,8 @@ __all__ = [
     "TaskSpec",
     "TASKS",
     "STRATEGIES",
+    "StrategyConfig",
+    "register_strategy",
     "DONE",
     "PhaseMachine",
     "PhaseSpec",

@@ -247,7 +247,7 @@ def test_contact_comparison_crosses_controllers_strategies_and_the_grid() -> Non
     assert len(jobs) == len(arms) * 6 * len(exp.seeds) and len({j.key for j in jobs}) == len(jobs)
     job = next(j for j in jobs if j.arm == "impedance/tilt" and j.cell["task.lateral_error"] == 0.003)
     cfg = job.config
-    assert cfg.task.name == "held_insertion" and cfg.task.strategy == "tilt"  # type: ignore[attr-defined]
+    assert cfg.task.name == "held_insertion" and cfg.task.strategy.name == "tilt"  # type: ignore[attr-defined]
     assert cfg.task.lateral_error == 0.003  # type: ignore[attr-defined]
     assert cfg.scene.assets.clearance == 0.0001 and cfg.scene.assets.chamfer == 0.001
     assert cfg.physics.profile == "precision"
@@ -272,7 +272,7 @@ def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: must be one of straight, force, spiral, tilt, align, got 'poke'",
+            "strategies[0]: unknown strategy 'poke'; known: align, force, spiral, straight, tilt",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",

@@ -305,7 +305,7 @@ RUNS = {
     "wedged": (_held("pd", "spiral", "lateral_error=0.0015", "tilt_error=0.02618"), 1, "wedged"),
     "missed": (_held("impedance", "force", "lateral_error=0.004", chamfer=0.0), 1, "missed"),
     "jammed": (  # too little force to push the peg down the bore: it stops in it
-        _held("impedance", "force", "lateral_error=0.0", "insert_force=0.2", friction=True),
+        _held("impedance", "force", "lateral_error=0.0", "strategy.insert_force=0.2", friction=True),
         1,
         "jammed",
     ),

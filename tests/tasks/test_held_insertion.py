@@ -52,12 +52,19 @@ def test_the_task_family_is_chosen_by_name() -> None:
     [
         (
             ["task.strategy=wiggle"],
-            "task.strategy must be one of straight, force, spiral, tilt, align, got 'wiggle'",
+            "task.strategy: unknown strategy 'wiggle'; known: align, force, spiral, straight, tilt",
         ),
         (["task.lateral_error=-0.001"], "task.lateral_error must be >= 0, got -0.001"),
         (["task.tilt_error=0.3"], "task.tilt_error must be below 0.2 rad, got 0.3"),
-        (["task.spiral_pitch=0"], "task.spiral_pitch must be > 0, got 0"),
-        (["task.search_force=oops"], "task.search_force: expected a number, got 'oops'"),
+        (
+            ["task.strategy=spiral", "task.strategy.spiral_pitch=0"],
+            "task.strategy.spiral_pitch must be > 0, got 0",
+        ),
+        (
+            ["task.strategy=spiral", "task.strategy.search_force=oops"],
+            "task.strategy.search_force: expected a number, got 'oops'",
+        ),
+        (["task.strategy.spiral_pitch=0.001"], "task.strategy.spiral_pitch: unknown field; known:"),
     ],
 )
 def test_bad_task_values_are_named(sets: list[str], message: str) -> None:
@@ -154,7 +161,7 @@ def test_force_strategy_regulates_the_push_with_the_admittance(tmp_path: Path) -
         tmp_path,
         "task.strategy=force",
         "task.lateral_error=0.0015",
-        "task.insert_time=1.5",
+        "task.strategy.insert_time=1.5",
         controller={"name": "admittance"},
     )
     assert r.status == "failure" and r.reason == "missed"
@@ -203,11 +210,14 @@ CONTACT_MPC = {
 @pytest.mark.parametrize(
     ("sets", "message"),
     [
-        (["task.datum_offset=0.05"], "task.datum_offset: the datum touch reaches 45.4 mm from the hole"),
-        (["task.datum_offset=0.02", "task.lateral_error=0.003"], "within 1 mm of the hole's mouth"),
         (
-            ["task.search_pitch=0.002"],
-            "task.search_pitch: 0.002 m leaves gaps in the chamfer's capture range",
+            ["task.strategy.datum_offset=0.05"],
+            "task.strategy.datum_offset: the datum touch reaches 45.4 mm from the hole",
+        ),
+        (["task.strategy.datum_offset=0.02", "task.lateral_error=0.003"], "within 1 mm of the hole's mouth"),
+        (
+            ["task.strategy.search_pitch=0.002"],
+            "task.strategy.search_pitch: 0.002 m leaves gaps in the chamfer's capture range",
         ),
     ],
 )

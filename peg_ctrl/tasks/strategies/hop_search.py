@@ -34,24 +34,12 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.tasks.phases import TrajectorySequence
 
-__all__ = ["HexLattice", "HopSearch", "HopSettings", "Hold"]
+__all__ = ["HexLattice", "HopSearch", "HopSettings", "PRESS_AXES", "GUIDE_AXES"]
 
 _Vec = NDArray[np.float64]
 PRESS_AXES = (False, False, True, False, False, False)  # force along z only
 _CONFIRM = 0.01  # a contact must last this long [s]
 GUIDE_AXES = (True, True, True, False, False, False)  # and free laterally
-
-
-class Hold:
-    """A constant target (a pose, with a wrench on some axes) until it is replaced."""
-
-    duration = 0.0
-
-    def __init__(self, target: GripperTarget) -> None:
-        self.target = target
-
-    def sample(self, t: float) -> GripperTarget:
-        return self.target
 
 
 @dataclasses.dataclass(frozen=True)

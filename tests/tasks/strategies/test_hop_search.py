@@ -10,7 +10,7 @@ import pytest
 
 from peg_ctrl.planners import make_planner
 from peg_ctrl.planners.base import MotionLimits
-from peg_ctrl.tasks.hop_search import HexLattice, HopSearch, HopSettings
+from peg_ctrl.tasks.strategies.hop_search import HexLattice, HopSearch, HopSettings
 
 CENTRE = np.array([0.2, 0.0])
 Z_FACE = 0.05
