@@ -35,6 +35,33 @@ def _rows(path: Path) -> list[dict]:
         return [{k: v for k, v in row.items() if k not in WALL_CLOCK_FIELDS} for row in csv.DictReader(fh)]
 
 
+def test_an_episode_key_names_its_f_t_sensor_only_when_it_has_one() -> None:
+    """An episode that leaves the F/T sensor alone is hashed without the sensor model's fields
+    (its key is the one it had before they existed); any F/T setting is part of its key."""
+    import dataclasses
+    import hashlib
+    import json
+
+    from peg_ctrl.config import to_dict
+    from peg_ctrl.experiments.config import episode_key
+    from peg_ctrl.run.episode import DomainConfig, EpisodeConfig
+
+    def without_ft_fields(cfg: EpisodeConfig) -> str:
+        data = to_dict(cfg)
+        for name in ("torque_noise", "ft_latency", "ft_bias_drift", "ft_sensor"):
+            del data["domain"][name]
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
+
+    plain = EpisodeConfig(seed=3, domain=DomainConfig(position_noise=1e-4))
+    assert episode_key(plain) == without_ft_fields(plain)
+    keys = {episode_key(plain)}
+    for ft in ({"ft_sensor": "ideal"}, {"force_noise": 0.1}, {"torque_noise": 0.1}, {"ft_latency": 0.01}):
+        cfg = dataclasses.replace(plain, domain=dataclasses.replace(plain.domain, **ft))
+        assert episode_key(cfg) != without_ft_fields(cfg), ft  # force_noise changed meaning
+        keys.add(episode_key(cfg))
+    assert len(keys) == 5
+
+
 def test_shipped_experiments_load() -> None:
     for path in sorted(CONFIGS.glob("*.yaml")):
         exp = load_experiment(path)
