@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-PAGES = ("api.md", "rl.md")
+PAGES = ("api.md", "rl.md", "sensing.md")
 _BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -57,7 +57,7 @@ def test_example_runs(where: str, code: str, tmp_path: Path, monkeypatch: pytest
 ROOT = DOCS.parent
 HELD_INSERTION = DOCS / "demo" / "held_insertion.yaml"
 # The row of the featured comparison it reproduces: mpc/align, friction 0.3, 1 mm, no tilt, seed 0.
-HELD_INSERTION_KEY = "0820178eef328582"
+HELD_INSERTION_KEY = "1bbc9ea1d53d7aa0"
 
 
 def _contact_hard_row(key: str) -> dict[str, str]:

@@ -37,7 +37,9 @@ y, z]`` with ``w >= 0``)
     ``gripper_pos`` (3,) pinch point [m]; ``gripper_quat`` (4,); ``gripper_vel`` (6,) linear [m/s]
     (world) and angular [rad/s] (gripper frame) velocity; ``jaw`` (1,) measured pad separation
     [m]; ``ft_wrench`` (6,) the wrist force/torque sensor, force [N] and torque [N m] that the
-    base exerts on the gripper, in the world frame, with any ``disturbances`` sensor noise;
+    base exerts on the gripper, in the world frame, as the sensor reports it (with any
+    ``disturbances`` sensor noise, latency and bias drift; the same reading the controller
+    acts on in the next step);
     ``peg_pos`` (3,) [m] and ``peg_quat`` (4,) the peg's centre and orientation; ``hole_pos``
     (3,) the centre of the hole's mouth [m] (the goal). Flatten it with
     ``gymnasium.wrappers.FlattenObservation`` for a single vector.
@@ -79,8 +81,12 @@ Termination and truncation
 Other keyword arguments of ``gymnasium.make``
     ``controller`` (name or mapping, default ``pd``); ``profile`` (physics profile, default
     ``seed``); ``disturbances`` (a mapping of :class:`~peg_ctrl.run.episode.DomainConfig` fields:
-    ``peg_mass_scale``, ``friction_scale``, ``gain_scale`` ranges drawn per episode, and
-    ``position_noise``, ``velocity_noise``, ``force_noise`` on the sensed state); ``scene`` (a
+    ``peg_mass_scale``, ``friction_scale``, ``gain_scale`` ranges drawn per episode;
+    ``position_noise`` [m] and ``velocity_noise`` [m/s, rad/s] on the sensed state; the wrist
+    F/T sensor as a preset ``ft_sensor`` (``ideal``, ``wrist``, ``forge``) or by its fields
+    ``force_noise`` [N] (the forces only: it used to cover the torques too, which now take
+    ``torque_noise``), ``torque_noise`` [N m], ``ft_latency`` [s] and ``ft_bias_drift``
+    [N/sqrt(s)], see docs/sensing.md); ``scene`` (a
     mapping of :class:`~peg_ctrl.sim.scene.SceneConfig` fields, e.g. ``{"assets": {"clearance":
     1e-4, "chamfer": 1e-3}}``); ``config`` (a base episode config: a mapping or a file path, which
     the other arguments override); ``randomize`` (the pick-and-place start pose, default True);
@@ -394,7 +400,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         info = self._info(m, success=False, reason="")
         if self.render_mode == "human":
             self.render()
-        return self._observation(obs.gripper), info
+        return self._observation(), info
 
     def step(
         self, action: NDArray[np.float32]
@@ -425,7 +431,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         info["reward_terms"] = terms
         if self.render_mode == "human":
             self.render()
-        return self._observation(state), reward, terminated, truncated, info
+        return self._observation(), reward, terminated, truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode == "rgb_array":
@@ -457,10 +463,9 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         jaw = 0.0 if self.fixed_jaw else 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
         return GripperTarget.trusted(p, q, v, rotate_inv(q, w_world), jaw)
 
-    def _observation(self, s: ControlState) -> dict[str, NDArray[np.float32]]:
-        """The observation of the gripper state ``s`` (noise-free; sensor noise is added here)."""
-        if self.loop.noise is not None:
-            s = self.loop.noise.apply(s)
+    def _observation(self) -> dict[str, NDArray[np.float32]]:
+        """The observation now: the gripper as sensed (the reading the next step acts on)."""
+        s = self.loop.sensed()
         force, torque = ft_world(s)
         peg = self.loop.peg
         assert peg is not None

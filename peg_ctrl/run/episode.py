@@ -44,6 +44,7 @@ from peg_ctrl.run.recorders import (
     VideoRecorder,
 )
 from peg_ctrl.sim.assets import AssetParams
+from peg_ctrl.sim.ft_model import FTSensorModel, ft_preset
 from peg_ctrl.sim.jaw import load_default
 from peg_ctrl.sim.physics import PhysicsConfig
 from peg_ctrl.sim.physics import profile as physics_profile
@@ -79,35 +80,70 @@ EPISODE_TIME = 20.0  # default episode length [s of sim]: SPEC's 20,000 steps of
 
 @dataclasses.dataclass(frozen=True)
 class DomainConfig:
-    """Domain randomization beyond the start pose, drawn per seed (ranges are [low, high])."""
+    """Domain randomization beyond the start pose, drawn per seed (ranges are [low, high]), and
+    the sensors' noise.
+
+    The wrist force/torque sensor is either a preset (``ft_sensor``, see
+    :data:`~peg_ctrl.sim.ft_model.FT_PRESETS`) or the four fields ``force_noise``,
+    ``torque_noise``, ``ft_latency`` and ``ft_bias_drift`` (:class:`FTSensorModel`'s, see
+    docs/sensing.md); :attr:`ft_model` is the model in effect.
+    """
 
     peg_mass_scale: tuple[float, float] = (1.0, 1.0)  # factor on the peg's mass and inertia
     friction_scale: tuple[float, float] = (1.0, 1.0)  # factor on the peg's and block's friction
     gain_scale: tuple[float, float] = (1.0, 1.0)  # factor on each of the controller's GAINS
     position_noise: float = 0.0  # std of noise on the measured gripper position [m]
     velocity_noise: float = 0.0  # std of noise on the measured gripper velocity [m/s, rad/s]
-    force_noise: float = 0.0  # std of noise on the force/torque sensor [N, N m]
+    force_noise: float = 0.0  # std of noise on each F/T force channel [N] (torques: torque_noise)
+    torque_noise: float = 0.0  # std of noise on each F/T torque channel [N m]
+    ft_latency: float = 0.0  # the F/T reading arrives this late [s]
+    ft_bias_drift: float = 0.0  # random walk of the F/T force bias [N/sqrt(s)]
+    ft_sensor: str = ""  # an F/T preset (ideal, wrist, forge) instead of the four fields above
 
     def __post_init__(self) -> None:
         for name in ("peg_mass_scale", "friction_scale", "gain_scale"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
                 raise ConfigError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
-        for name in ("position_noise", "velocity_noise", "force_noise"):
+        for name in ("position_noise", "velocity_noise", *_FT_FIELDS):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"domain.{name} must be finite and >= 0, got {value!r}")
+        if self.ft_sensor:
+            ft_preset(self.ft_sensor, where="domain.ft_sensor")
+            for name in _FT_FIELDS:
+                if getattr(self, name) != 0:
+                    raise ConfigError(
+                        f"domain.{name}: set either domain.ft_sensor (a preset) or the sensor's "
+                        "noise fields, not both"
+                    )
+
+    @property
+    def ft_model(self) -> FTSensorModel:
+        """The wrist F/T sensor in effect: the preset ``ft_sensor``, else the four fields."""
+        if self.ft_sensor:
+            return ft_preset(self.ft_sensor, where="domain.ft_sensor")
+        return FTSensorModel(
+            force_noise=self.force_noise,
+            torque_noise=self.torque_noise,
+            latency=self.ft_latency,
+            bias_drift=self.ft_bias_drift,
+        )
 
     @property
     def noisy(self) -> bool:
-        """Whether any sensor noise is on."""
-        return self.position_noise > 0 or self.velocity_noise > 0 or self.force_noise > 0
+        """Whether any sensor noise is on (an ``ideal`` F/T preset is none)."""
+        return self.position_noise > 0 or self.velocity_noise > 0 or self.ft_model.noisy
 
     @property
     def random(self) -> bool:
         """Whether the seed changes anything here: a range wider than a point, or sensor noise."""
         ranges = (self.peg_mass_scale, self.friction_scale, self.gain_scale)
         return self.noisy or any(lo < hi for lo, hi in ranges)
+
+
+# DomainConfig's fields of the F/T sensor model, in FTSensorModel's order.
+_FT_FIELDS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -324,9 +360,12 @@ def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> L
     d, s = cfg.domain, cfg.success
     noise = None
     if d.noisy:
-        rng = np.random.default_rng([cfg.seed, 2])
         noise = SensorNoise(
-            position=d.position_noise, velocity=d.velocity_noise, force=d.force_noise, rng=rng
+            position=d.position_noise,
+            velocity=d.velocity_noise,
+            ft=d.ft_model,
+            dt=cfg.controller.control_dt,  # one F/T reading per control period
+            rng=np.random.default_rng([cfg.seed, 2]),
         )
     return Loop(
         model=model,

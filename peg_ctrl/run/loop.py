@@ -2,7 +2,7 @@
 
 Every control period::
 
-    observe (gripper state, with sensor noise) → task.target → controller.compute → data.ctrl
+    observe (gripper state as sensed: SensorNoise) → task.target → controller.compute → data.ctrl
     → ``decimation`` physics steps, each followed by one copy of ``data.sensordata`` (in C)
     → contact forces and penetrations of every physics step at once (numpy, preallocated)
     → observe the peg → monitors (divergence, contact force spike, grasp slip) → task.evaluate
@@ -11,7 +11,9 @@ Every control period::
 Per physics step the loop does only what must happen per step: step the physics and keep its
 contact sensors, so peak forces, the contact impulse, the force-spike check and the force trace
 are at the full physics rate. Everything the control law, the task and the monitors need runs
-once per control period. Autonomous episodes, teleoperation and the benchmark are thin drivers
+once per control period, and so are the sensors: :meth:`Loop.sensed` is one reading per
+control period, which the task, the controller (and an agent, see :mod:`peg_ctrl.gym.env`)
+share. Autonomous episodes, teleoperation and the benchmark are thin drivers
 of :class:`Loop`; no other code steps the physics in a loop (jaw calibration and the
 benchmark's raw-physics replay aside). The control period must be a whole multiple of the
 physics timestep.
@@ -31,6 +33,7 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
+from peg_ctrl.sim.ft_model import FTSensorModel, FTSensorStream
 from peg_ctrl.sim.scene import HOME_KEY, SceneConfig
 from peg_ctrl.sim.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
 from peg_ctrl.tasks.base import Evaluation, Observation, Task
@@ -41,21 +44,36 @@ __all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTi
 
 
 class SensorNoise:
-    """Zero-mean Gaussian noise on the sensed gripper state; standard deviations in [m], [m/s]
-    (and [rad/s]), [N] (and [N m]); drawn from ``rng``."""
+    """The gripper state as its sensors report it, one reading per control period ``dt`` [s]:
+    zero-mean Gaussian noise of standard deviation ``position`` [m] on the position and
+    ``velocity`` [m/s] (and [rad/s]) on the velocities (drawn when either is on), and the wrist
+    force/torque reading through the sensor model ``ft``
+    (:class:`~peg_ctrl.sim.ft_model.FTSensorStream`: noise per channel, latency, bias drift);
+    everything drawn from ``rng``, in that order.
 
-    def __init__(self, *, position: float, velocity: float, force: float, rng: np.random.Generator) -> None:
-        self.position, self.velocity, self.force = position, velocity, force
+    :meth:`reset` at the start of an episode with the true state (it fills the F/T delay line).
+    """
+
+    def __init__(
+        self, *, position: float, velocity: float, ft: FTSensorModel, dt: float, rng: np.random.Generator
+    ) -> None:
+        self.position, self.velocity = position, velocity
         self.rng = rng
+        self.ft = FTSensorStream(ft, dt=dt, rng=rng)
+        self._kinematic = position > 0 or velocity > 0
+
+    def reset(self, s: ControlState) -> None:
+        self.ft.reset(s.ft_wrench)
 
     def apply(self, s: ControlState) -> ControlState:
-        rng = self.rng
-        return s._replace(
-            p_world=s.p_world + rng.normal(0.0, self.position, 3),
-            v_world=s.v_world + rng.normal(0.0, self.velocity, 3),
-            omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3),
-            ft_wrench=s.ft_wrench + rng.normal(0.0, self.force, 6),
-        )
+        if self._kinematic:
+            rng = self.rng
+            s = s._replace(
+                p_world=s.p_world + rng.normal(0.0, self.position, 3),
+                v_world=s.v_world + rng.normal(0.0, self.velocity, 3),
+                omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3),
+            )
+        return s._replace(ft_wrench=self.ft.apply(s.ft_wrench))
 
 
 class StepInfo(NamedTuple):
@@ -201,6 +219,7 @@ class Loop:
         self._observe = getattr(self.controller, "observe_belief", None)
         self._belief: object = None
         self.compute_times: list[float] = []  # the controller's wall time per control step [s]
+        self._sensed: ControlState | None = None  # this control period's reading (sensed())
 
     @property
     def control_dt(self) -> float:
@@ -211,14 +230,27 @@ class Loop:
         """The gripper's state now, noise-free."""
         return self.reader.control_state(self.data)
 
+    def sensed(self) -> ControlState:
+        """The gripper's state now as the sensors report it (:class:`SensorNoise`; the true
+        state without noise). One reading per control period: until the next :meth:`step`
+        steps the physics, it is the same reading, the one the step will act on."""
+        if self._sensed is None:
+            state = self.reader.control_state(self.data)
+            self._sensed = self.noise.apply(state) if self.noise is not None else state
+        return self._sensed
+
     def reset(self, rng: np.random.Generator) -> Observation:
         """Home keyframe, the task's initial state from ``rng``, one ``mj_forward``; resets the
-        controller, monitors and task. Returns the first (noise-free) observation."""
+        controller, monitors, task and sensor noise (its F/T delay line holds this true
+        reading). Returns the first (noise-free) observation."""
         data = self.data
         mujoco.mj_resetDataKeyframe(self.model, data, self._home)
         self.task.reset(self.model, data, rng)
         mujoco.mj_forward(self.model, data)
         state = self.reader.control_state(data)
+        if self.noise is not None:
+            self.noise.reset(state)
+        self._sensed = None
         self.controller.reset(state)
         self._belief = None
         self.compute_times = []
@@ -245,9 +277,7 @@ class Loop:
         data = self.data
         assert self.peg is not None, "reset() first"
         t0 = clock()
-        state = self.reader.control_state(data)
-        if self.noise is not None:
-            state = self.noise.apply(state)
+        state = self.sensed()
         target = self.task.target(Observation(float(data.time), state, self.peg))
         t1 = clock()
         out = self._compute(state, target)
@@ -306,6 +336,7 @@ class Loop:
             raw[i] = sd
             peg_log[i] = peg_q
         self.steps += self.decimation
+        self._sensed = None  # a new period: a new reading
 
     def _monitor(self, state: ControlState) -> tuple[list[float], list[float], EpisodeFailure | None]:
         """Reduce the period's sensors, observe the peg and run the monitors."""

@@ -137,6 +137,15 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (["run", "--planner", "warp"], "unknown planner 'warp'; known: fixed_speed, ruckig"),
         (["run", "--seed", "-3"], "seed must be >= 0"),
         (["run", "--config", "missing.yaml"], "does not exist"),
+        (
+            ["run", "--set", "domain.ft_sensor=nope"],
+            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, wrist",
+        ),
+        (
+            ["run", "--set", "domain.ft_sensor=wrist", "--set", "domain.torque_noise=0.01"],
+            "domain.torque_noise: set either domain.ft_sensor (a preset) or the sensor's noise fields",
+        ),
+        (["run", "--seed", "3", "--set", "domain.ft_sensor=ideal"], "--seed has no effect here"),
     ],
 )
 def test_user_errors_are_one_line_with_exit_2(argv, message, tmp_path: Path) -> None:
@@ -447,6 +456,8 @@ def test_top_level_help_imports_no_registry() -> None:
         ["--set", "task.name=held_insertion"],  # draws its lateral error direction from the seed
         ["--set", "domain.friction_scale=[0.8,1.2]"],
         ["--set", "domain.force_noise=0.1"],
+        ["--set", "domain.ft_sensor=wrist"],
+        ["--set", "domain.ft_latency=0.01"],
     ],
 )
 def test_seed_is_accepted_when_the_episode_depends_on_it(

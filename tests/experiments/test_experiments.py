@@ -35,6 +35,21 @@ def _rows(path: Path) -> list[dict]:
         return [{k: v for k, v in row.items() if k not in WALL_CLOCK_FIELDS} for row in csv.DictReader(fh)]
 
 
+def test_an_episode_key_is_its_whole_config() -> None:
+    """Any F/T sensor setting (the sensor model's fields, a preset) makes another episode."""
+    import dataclasses
+
+    from peg_ctrl.experiments.config import episode_key
+    from peg_ctrl.run.episode import DomainConfig, EpisodeConfig
+
+    plain = EpisodeConfig(seed=3, domain=DomainConfig(position_noise=1e-4))
+    assert episode_key(plain) == episode_key(dataclasses.replace(plain)) and len(episode_key(plain)) == 16
+    keys = {episode_key(plain)}
+    for ft in ({"ft_sensor": "ideal"}, {"force_noise": 0.1}, {"torque_noise": 0.1}, {"ft_latency": 0.01}):
+        keys.add(episode_key(dataclasses.replace(plain, domain=dataclasses.replace(plain.domain, **ft))))
+    assert len(keys) == 5
+
+
 def test_shipped_experiments_load() -> None:
     for path in sorted(CONFIGS.glob("*.yaml")):
         exp = load_experiment(path)

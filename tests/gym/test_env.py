@@ -19,6 +19,7 @@ import peg_ctrl  # noqa: F401  (registers the environment)
 from peg_ctrl.config import ConfigError
 from peg_ctrl.errors import UnknownComponent
 from peg_ctrl.gym.env import ENV_ID, PegInsertionEnv
+from peg_ctrl.sim.state import ft_world
 
 # Velocities, forces and the peg's position have no physical bound, and the space says so.
 pytestmark = pytest.mark.filterwarnings("ignore:.*Box observation space m.*:UserWarning")
@@ -135,6 +136,29 @@ def test_seeding_reproduces_with_domain_disturbances() -> None:
         env.reset(seed=seed)
         masses.add(round(float(env.model.body_mass[env.model.body("peg").id]), 9))
     assert len(masses) == 3  # a fresh domain draw per episode
+
+
+def test_the_observed_wrench_is_the_reading_the_controller_acts_on_next() -> None:
+    """With a sensor that has noise, latency and drift, the agent sees the reading the next
+    control step uses (one reading per period), not a second draw."""
+    env = gym.make(ENV_ID, disturbances={"ft_sensor": "wrist"}).unwrapped
+    acted_on: list[np.ndarray] = []
+
+    class Keep:
+        def record(self, loop, info) -> None:  # type: ignore[no-untyped-def]
+            force, torque = ft_world(info.gripper)
+            acted_on.append(np.concatenate([force, torque]).astype(np.float32))
+
+    obs, _ = env.reset(seed=3)
+    env.loop.recorders = [*env.loop.recorders, Keep()]
+    observed = [obs["ft_wrench"]]
+    for _ in range(10):
+        obs, *_ = env.step(DOWN)
+        observed.append(obs["ft_wrench"])
+    np.testing.assert_array_equal(observed[:-1], acted_on)
+    force, torque = ft_world(env.loop.state())
+    assert not np.array_equal(observed[-1], np.concatenate([force, torque]).astype(np.float32))
+    env.close()
 
 
 def test_a_straight_descent_seats_the_held_peg_with_sparse_reward() -> None:

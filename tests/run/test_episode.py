@@ -18,6 +18,7 @@ from peg_ctrl.controllers import PDConfig
 from peg_ctrl.run.episode import (
     FAILURE_REASONS,
     WALL_CLOCK_FIELDS,
+    DomainConfig,
     EpisodeConfig,
     RandomizationConfig,
     contact_to_seat,
@@ -25,6 +26,7 @@ from peg_ctrl.run.episode import (
     run_episode,
 )
 from peg_ctrl.run.episode_log import STEP_FIELDS, TRACE_COLUMNS, read_log, read_trace
+from peg_ctrl.sim.ft_model import FT_PRESETS, FTSensorModel
 from peg_ctrl.tasks.pick_and_place import SuccessConfig, TaskConfig, initial_qpos
 
 from ..conftest import sigint_default
@@ -279,3 +281,74 @@ def test_contact_to_seat_is_none_unless_contact_came_first(
     """A peg seated before it first touched the block (dropped into a wide hole, it meets the
     bore only afterwards) has no contact-to-seat time, not a negative one."""
     assert contact_to_seat(first, seated) == expected
+
+
+# -- the sensors' noise (domain) ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("domain", "message"),
+    [
+        ({"torque_noise": -0.1}, "domain.torque_noise must be finite and >= 0, got -0.1"),
+        ({"ft_latency": float("nan")}, "domain.ft_latency must be finite and >= 0, got nan"),
+        ({"ft_bias_drift": float("inf")}, "domain.ft_bias_drift must be finite and >= 0, got inf"),
+        (
+            {"ft_sensor": "nope"},
+            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, wrist",
+        ),
+        (
+            {"ft_sensor": "wrist", "force_noise": 0.1},
+            "domain.force_noise: set either domain.ft_sensor (a preset) or the sensor's noise fields, "
+            "not both",
+        ),
+        (
+            {"ft_sensor": "ideal", "ft_latency": 0.01},
+            "domain.ft_latency: set either domain.ft_sensor (a preset) or the sensor's noise fields, "
+            "not both",
+        ),
+    ],
+)
+def test_sensor_noise_errors_name_the_field(domain: dict, message: str) -> None:
+    with pytest.raises(ConfigError) as exc:
+        episode_config_from_mapping({"domain": domain})
+    assert str(exc.value) == message
+
+
+def test_the_ft_model_is_the_preset_or_the_four_fields() -> None:
+    assert DomainConfig().ft_model == FTSensorModel()
+    for name, preset in FT_PRESETS.items():
+        assert DomainConfig(ft_sensor=name).ft_model == preset
+    fields = DomainConfig(force_noise=0.2, torque_noise=0.003, ft_latency=0.02, ft_bias_drift=0.05)
+    assert fields.ft_model == FTSensorModel(
+        force_noise=0.2, torque_noise=0.003, latency=0.02, bias_drift=0.05
+    )
+
+
+@pytest.mark.parametrize(
+    ("domain", "noisy"),
+    [
+        ({}, False),
+        ({"ft_sensor": "ideal"}, False),
+        ({"ft_sensor": "wrist"}, True),
+        ({"force_noise": 0.1}, True),
+        ({"torque_noise": 0.01}, True),
+        ({"ft_latency": 0.01}, True),
+        ({"ft_bias_drift": 0.01}, True),
+        ({"velocity_noise": 0.01}, True),
+    ],
+)
+def test_any_sensor_noise_makes_the_seed_matter(domain: dict, noisy: bool) -> None:
+    cfg = episode_config_from_mapping({"domain": domain})
+    assert cfg.domain.noisy is noisy and cfg.domain.random is noisy and cfg.seeded is noisy
+
+
+def test_an_ideal_ft_sensor_is_the_episode_without_domain_settings(tmp_path: Path) -> None:
+    base = {"seed": 4, "randomization": {"enabled": True}, "max_steps": 3000}
+    plain = run_episode(episode_config_from_mapping(base), tmp_path / "plain", plot=False)
+    ideal = episode_config_from_mapping({**base, "domain": {"ft_sensor": "ideal"}})
+    same = run_episode(ideal, tmp_path / "ideal", plot=False)
+    np.testing.assert_array_equal(read_trace(tmp_path / "plain"), read_trace(tmp_path / "ideal"))
+    skip = {*WALL_CLOCK_FIELDS, "log_path", "trace_path", "plot_path", "video_path"}
+    assert {k: v for k, v in plain.to_dict().items() if k not in skip} == {
+        k: v for k, v in same.to_dict().items() if k not in skip
+    }

@@ -10,7 +10,8 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers import make_controller
 from peg_ctrl.controllers.base import ControlOutput
 from peg_ctrl.errors import ConfigError, DivergenceError
-from peg_ctrl.run.loop import Loop, StepInfo
+from peg_ctrl.run.loop import Loop, SensorNoise, StepInfo
+from peg_ctrl.sim.ft_model import FT_PRESETS, FTSensorModel
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.state import BLOCK_PEG, PAIRS, ControlState
 from peg_ctrl.tasks.monitors import ContactMonitor
@@ -154,3 +155,72 @@ def test_monitors_and_trace_see_every_physics_step_between_control_steps(model: 
     assert loop.contact.peak_any == pytest.approx(max(peaks), rel=1e-12)
     assert loop.history.impulse == pytest.approx(impulse, rel=1e-9, abs=1e-12)
     assert np.concatenate(rows).shape == (400, model.nsensordata)
+
+
+# -- the sensed state ---------------------------------------------------------------------------
+
+
+def _noisy(model: mujoco.MjModel, ft: FTSensorModel, *, position: float = 0.0, seed: int = 0) -> Loop:
+    loop = make(model, TrackingTask(HOME, qpos=model.key("home").qpos.copy()), control_dt=0.002)
+    rng = np.random.default_rng(seed)
+    loop.noise = SensorNoise(position=position, velocity=0.0, ft=ft, dt=loop.control_dt, rng=rng)
+    return loop
+
+
+def test_the_ft_reading_lags_the_truth_from_the_reset_on(model: mujoco.MjModel) -> None:
+    """Two control periods of latency: each step acts on the true wrench of two steps before,
+    and the first steps on the true wrench at the reset (the delay line starts with it)."""
+    loop = _noisy(model, FTSensorModel(latency=0.004))  # the peg drops: the wrench changes
+    truth: list[np.ndarray] = []
+    sensed: list[np.ndarray] = []
+
+    class Keep:
+        def record(self, loop: Loop, info: StepInfo) -> None:
+            sensed.append(info.gripper.ft_wrench)
+
+    loop.recorders = [Keep()]
+    loop.reset(np.random.default_rng(0))
+    for _ in range(30):
+        truth.append(loop.state().ft_wrench)
+        loop.step()
+    expected = [truth[0], truth[0], *truth[:-2]]
+    np.testing.assert_array_equal(sensed, expected)
+    assert not np.array_equal(truth[0], truth[-1])
+
+
+def test_one_reading_per_control_period(model: mujoco.MjModel) -> None:
+    loop = _noisy(model, FT_PRESETS["wrist"], position=1e-4)
+    loop.reset(np.random.default_rng(0))
+    first = loop.sensed()
+    assert loop.sensed() is first  # asked twice, read once
+    seen: list[ControlState] = []
+
+    class Keep:
+        def record(self, loop: Loop, info: StepInfo) -> None:
+            seen.append(info.gripper)
+
+    loop.recorders = [Keep()]
+    loop.step()
+    assert seen == [first]  # the step acted on it
+    assert loop.sensed() is not first  # a new period, a new reading
+    assert not np.array_equal(loop.sensed().ft_wrench, loop.state().ft_wrench)
+
+
+def test_the_same_force_and_torque_noise_is_the_old_single_sigma_draw_for_draw(model: mujoco.MjModel) -> None:
+    """force_noise = torque_noise = sigma reads exactly as domain.force_noise = sigma did when
+    it covered all six channels (the reference below is that formula)."""
+    sigma, position = 0.3, 2e-4
+    loop = _noisy(model, FTSensorModel(force_noise=sigma, torque_noise=sigma), position=position, seed=5)
+    loop.reset(np.random.default_rng(0))
+    state = loop.state()
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        expected = state._replace(
+            p_world=state.p_world + rng.normal(0.0, position, 3),
+            v_world=state.v_world + rng.normal(0.0, 0.0, 3),
+            omega_body=state.omega_body + rng.normal(0.0, 0.0, 3),
+            ft_wrench=state.ft_wrench + rng.normal(0.0, sigma, 6),
+        )
+        got = loop.noise.apply(state)  # type: ignore[union-attr]
+        for name in ("p_world", "v_world", "omega_body", "ft_wrench"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(expected, name), err_msg=name)

@@ -1,0 +1,179 @@
+"""A wrist force/torque sensor as a real one reads: white noise, latency and a drifting bias.
+
+:class:`FTSensorModel` is the configuration (in the manner of Isaac Lab's ``GaussianNoiseCfg``
+and ``NoiseModelWithAdditiveBiasCfg``); :class:`FTSensorStream` applies it to the true wrench
+(:attr:`peg_ctrl.sim.state.ControlState.ft_wrench`: forces [N], then torques [N m], sensor
+frame), one reading per control period. What the sensor reports at step ``n``::
+
+    reading_n = wrench(t_n - latency) + [b_n, 0] + [e_f, e_t]
+    b_n = b_(n-1) + N(0, bias_drift^2 dt)          per force channel, b_0 = 0
+    e_f ~ N(0, force_noise^2),  e_t ~ N(0, torque_noise^2)   fresh every reading
+
+The delayed wrench is interpolated linearly between the two readings around ``t_n - latency``
+when the latency is not a whole number of periods, and is the first reading before the stream
+started. The bias starts at zero: a constant offset is what a tare removes; the drift after it
+is not.
+
+Presets (:data:`FT_PRESETS`), with the sources of their numbers:
+
+``ideal``
+    The true wrench, unchanged.
+``wrist``
+    A dedicated wrist F/T sensor. Robotiq FT 300-S (its instruction manual): noise about 0.1 N
+    on force and 0.005 N m on torque, a 100 Hz data stream, so a reading is up to one period
+    (0.01 s) old. The drift is an ATI Mini45's, measured on a DAQ (hqhan03/VBTS_test,
+    ``docs/measurement_protocol.md``): Fz zero drift 0.12 N in 4 min, 0.12 / sqrt(240 s)
+    = 0.008 N/sqrt(s), rounded up to 0.01. (The same measurement's white noise, sigma
+    0.02/0.02/0.05 N on Fx/Fy/Fz, is below the FT 300-S's.)
+``forge``
+    The F/T observation noise of FORGE (Isaac Lab, ``source/isaaclab_tasks/isaaclab_tasks/
+    direct/forge/forge_env_cfg.py``, ``ForgeObsRandCfg.ft_force``): sigma 1.0 N on each force
+    channel at every step, no bias, no delay. FORGE observes no torque; 0.01 N m keeps a real
+    sensor's torque/force noise ratio of about 1/100 m. (FORGE also smooths the force with an
+    exponential moving average before the noise; this preset does not.)
+
+For scale: an ATI Axia80 delivers its readings over Ethernet within 28 ms (its Ethernet
+manual), so latencies of a few control periods are realistic. docs/sensing.md has the table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from peg_ctrl.errors import ConfigError, UnknownComponent
+
+__all__ = ["FTSensorModel", "FTSensorStream", "FT_PRESETS", "ft_preset"]
+
+_Wrench = NDArray[np.float64]
+
+# A latency within this fraction of a whole number of periods is that number (0.01 / 0.001 is
+# 10.000000000000002, not 10 periods and a 2e-15 interpolation).
+_WHOLE_PERIODS_TOL = 1e-9
+
+
+@dataclasses.dataclass(frozen=True)
+class FTSensorModel:
+    """How a wrist force/torque sensor corrupts the true wrench. All zero: an ideal sensor."""
+
+    force_noise: float = 0.0  # sigma of white noise on each force channel, per reading [N]
+    torque_noise: float = 0.0  # sigma of white noise on each torque channel, per reading [N m]
+    latency: float = 0.0  # the reading arrives this late [s]
+    bias_drift: float = 0.0  # random walk of the force bias: sigma = bias_drift * sqrt(t) [N/sqrt(s)]
+
+    def __post_init__(self) -> None:
+        for field, unit in (
+            ("force_noise", "N"),
+            ("torque_noise", "N m"),
+            ("latency", "s"),
+            ("bias_drift", "N/sqrt(s)"),
+        ):
+            value = getattr(self, field)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ConfigError(f"{field} must be finite and >= 0 {unit}, got {value!r}")
+
+    @property
+    def noisy(self) -> bool:
+        """Whether the model changes a reading at all."""
+        return self != IDEAL
+
+
+IDEAL = FTSensorModel()
+
+FT_PRESETS: dict[str, FTSensorModel] = {
+    "ideal": IDEAL,
+    "wrist": FTSensorModel(force_noise=0.1, torque_noise=0.005, latency=0.01, bias_drift=0.01),
+    "forge": FTSensorModel(force_noise=1.0, torque_noise=0.01),
+}
+
+
+def ft_preset(name: str, *, where: str = "") -> FTSensorModel:
+    """The preset called ``name``; an unknown name lists the known ones (naming the field
+    ``where`` it came from, if given)."""
+    try:
+        return FT_PRESETS[name]
+    except KeyError:
+        raise UnknownComponent("F/T sensor preset", name, FT_PRESETS, where=where) from None
+
+
+class FTSensorStream:
+    """One episode's F/T readings through ``model``, one per period ``dt`` [s], from ``rng``.
+
+    Call :meth:`reset` with the first true wrench, then :meth:`apply` once per reading. The
+    delay line is a preallocated ring of the last readings; an ideal model returns its input
+    untouched and draws nothing.
+    """
+
+    def __init__(self, model: FTSensorModel, *, dt: float, rng: np.random.Generator) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ConfigError(f"dt must be finite and > 0 s, got {dt!r}")
+        self.model = model
+        self.dt = dt
+        self.rng = rng
+        self._ideal = not model.noisy
+        periods = model.latency / dt
+        whole = round(periods)
+        if abs(periods - whole) <= _WHOLE_PERIODS_TOL * max(1.0, periods):
+            self._lag, self._frac = int(whole), 0.0
+        else:
+            self._lag, self._frac = math.floor(periods), periods - math.floor(periods)
+        # The readings back to lag (and lag + 1 to interpolate); none needed without latency.
+        size = self._lag + (2 if self._frac > 0 else 1)
+        self._ring = np.zeros((size, 6)) if size > 1 else None
+        self._head = 0  # row of the newest reading
+        self._scratch = np.zeros(6)
+        self._bias = np.zeros(3)  # on the force channels [N]
+        # One draw per reading: the bias's step (if it drifts), then the white noise of the
+        # channels that have any (forces 0-2, torques 3-5), each scaled by its sigma.
+        sigma = np.array([model.force_noise] * 3 + [model.torque_noise] * 3)
+        noisy = np.flatnonzero(sigma > 0)
+        self._lo, self._hi = (int(noisy[0]), int(noisy[-1]) + 1) if noisy.size else (0, 0)
+        walk = 3 if model.bias_drift > 0 else 0
+        step = model.bias_drift * math.sqrt(dt)  # sigma of one step of the walk [N]
+        self._scale = np.concatenate([np.full(walk, step), sigma[self._lo : self._hi]])
+        self._z = np.zeros(self._scale.size)
+        self._z_bias, self._z_noise = self._z[:walk], self._z[walk:]  # views
+
+    @property
+    def bias(self) -> _Wrench:
+        """The force bias now (3,) [N] (a copy)."""
+        return self._bias.copy()
+
+    def reset(self, first_reading: _Wrench) -> None:
+        """Start an episode: the delay line holds ``first_reading`` (6,) (the true wrench at the
+        start), the bias is zero."""
+        if self._ring is not None:
+            self._ring[:] = first_reading
+        self._head = 0
+        self._bias[:] = 0.0
+
+    def apply(self, true_wrench: _Wrench) -> _Wrench:
+        """What the sensor reports for the true wrench (6,) of this step: a new (6,) array
+        (``true_wrench`` itself for an ideal model)."""
+        if self._ideal:
+            return true_wrench
+        ring = self._ring
+        if ring is None:
+            out = np.array(true_wrench, dtype=np.float64)
+        else:
+            n = len(ring)
+            head = self._head = (self._head + 1) % n
+            ring[head] = true_wrench
+            out = ring[(head - self._lag) % n].copy()
+            if self._frac > 0:
+                # (1 - f) * reading(lag periods ago) + f * reading(lag + 1 periods ago)
+                out *= 1.0 - self._frac
+                np.multiply(ring[(head - self._lag - 1) % n], self._frac, out=self._scratch)
+                out += self._scratch
+        if self._z.size:
+            self.rng.standard_normal(out=self._z)
+            self._z *= self._scale
+            if self._z_bias.size:
+                self._bias += self._z_bias
+                out[:3] += self._bias
+            if self._z_noise.size:
+                out[self._lo : self._hi] += self._z_noise
+        return out
