@@ -28,7 +28,7 @@ from peg_ctrl.sim.rotations import cross, rotate, rotate_inv
 from peg_ctrl.sim.scene import FT_SITE, HOME_KEY
 from peg_ctrl.sim.state import ControlState, ft_world
 
-__all__ = ["ContactSense", "WristModel", "WristSensor", "lowpass_alpha"]
+__all__ = ["Detector", "WristModel", "WristSensor", "lowpass_alpha", "within"]
 
 _Vec = NDArray[np.float64]
 
@@ -71,16 +71,35 @@ class WristModel:
 
 
 class WristSensor:
-    """Tared, low-passed contact wrench about a point of the gripper frame.
+    """The one estimator of the contact wrench on the hand: tare, noise level, bias, filters.
 
-    The tare is the mean reading while :meth:`accumulate_tare` is called (or, with
-    ``tare_time`` > 0, over the first ``tare_time`` seconds after :meth:`reset`, which must be
-    free of contact); the force bias is kept in world axes, the moment bias in the gripper frame
-    (it comes from the hand's own mass distribution).
+    Every controller and strategy that reads the wrist sensor reads it through this class:
+
+    - **Tare and noise.** The tare is the mean reading while :meth:`accumulate_tare` is called (or,
+      with ``tare_time`` > 0, over the first ``tare_time`` seconds after :meth:`reset`, which must
+      be free of contact); the force bias is kept in world axes, the moment bias in the gripper
+      frame (it comes from the hand's own mass distribution). The spread of the same readings is
+      the sensor's noise, per reading (``noise_force``, ``noise_moment``): nothing assumes a
+      datasheet value, so the detectors' thresholds follow whatever sensor is fitted.
+    - **Bias.** A sensor's zero drifts. While the caller knows the hand is free of contact
+      (``update(..., free=True)``: in the air, between touches), the bias follows the reading with
+      the time constant ``bias_time``.
+    - **Filters.** First-order low-passes, ``force_hz`` on the force and ``moment_hz`` on the
+      moment about ``centre_body`` (a point of the gripper frame: the held peg's lower end).
+      ``sigma_force`` and ``sigma_moment`` are the filtered estimates' standard deviations: the
+      noise through the filter, with the hand model's own ``resolution`` as a floor (the weight
+      and inertia the model leaves over, and the reading of a noise-free sensor, are not zero).
+    - **Acceleration.** The hand's inertia is compensated along its measured acceleration (the
+      finite difference of the sensed velocity, low-passed at ``accel_hz``), so a hop or a stop
+      does not read as a touch.
 
     Attributes:
         force: (3,) filtered contact force on the hand, world frame [N].
         moment: (3,) filtered moment of the contact about the point, world frame [N m].
+        force_bias: (3,) the force bias, world frame [N]; moment_bias_body (3,) the moment's,
+            gripper frame [N m].
+        noise_force: (3,) standard deviation of one force reading, world axes [N] (0 before a tare).
+        noise_moment: (3,) ... of one moment reading [N m].
     """
 
     def __init__(
@@ -92,44 +111,106 @@ class WristSensor:
         force_hz: float = 20.0,
         moment_hz: float = 5.0,
         tare_time: float = 0.0,
+        accel_hz: float = 0.0,
+        bias_time: float = 1.0,
+        resolution: tuple[float, float] = (0.05, 5e-4),
     ) -> None:
         self.wrist = WristModel(model)
         self.centre_body = np.asarray(centre_body, dtype=float)
         self.tare_time = tare_time
+        self.dt = dt
         self._a_force = lowpass_alpha(force_hz, dt)
         self._a_moment = lowpass_alpha(moment_hz, dt)
+        self._a_accel = lowpass_alpha(accel_hz, dt) if accel_hz > 0 else 0.0
+        self._a_bias = dt / bias_time
+        # Variance of a first-order low-pass's output per unit variance of white input.
+        self._gain_force = self._a_force / (2.0 - self._a_force)
+        self._gain_moment = self._a_moment / (2.0 - self._a_moment)
+        self.resolution = resolution
         self._zero = np.zeros(3)
         self.reset(None)
 
     def reset(self, state: ControlState | None) -> None:
-        """Forget the tare and the filters; the timed tare starts at ``state.t``."""
+        """Forget the tare, the noise estimate and the filters; the timed tare starts at ``state.t``."""
         self._t0 = state.t if state is not None else 0.0
         self._n = 0
         self.force_bias = np.zeros(3)
         self.moment_bias_body = np.zeros(3)
+        self._m2_force = np.zeros(3)  # Welford sums of squared deviations
+        self._m2_moment = np.zeros(3)
+        self.noise_force = np.zeros(3)
+        self.noise_moment = np.zeros(3)
         self.force = np.zeros(3)
         self.moment = np.zeros(3)
+        self.accel = np.zeros(3)
+        self._v_prev: _Vec | None = None
+
+    @property
+    def sigma_force(self) -> _Vec:
+        """(3,) Standard deviation of the filtered force, world axes [N]."""
+        return np.sqrt(self.noise_force**2 * self._gain_force + self.resolution[0] ** 2)
+
+    @property
+    def sigma_moment(self) -> _Vec:
+        """(3,) Standard deviation of the filtered moment [N m]."""
+        return np.sqrt(self.noise_moment**2 * self._gain_moment + self.resolution[1] ** 2)
+
+    def _wrench(self, state: ControlState) -> tuple[_Vec, _Vec]:
+        return self.wrist.contact_wrench(state, self.centre_body, self.accel if self._a_accel else self._zero)
 
     def raw(self, state: ControlState) -> tuple[_Vec, _Vec]:
         """The tared, unfiltered wrench (force [N], moment [N m], world)."""
-        f, tau = self.wrist.contact_wrench(state, self.centre_body, self._zero)
+        f, tau = self._wrench(state)
         return f - self.force_bias, tau - rotate(state.quat_world, self.moment_bias_body)
 
     def accumulate_tare(self, state: ControlState) -> None:
-        """Add this reading to the tare (the hand must be free of contact and at rest)."""
-        f, tau = self.wrist.contact_wrench(state, self.centre_body, self._zero)
+        """Add this reading to the tare and the noise estimate (the hand must be free of
+        contact and at rest)."""
+        self._track_accel(state)
+        f, tau = self._wrench(state)
+        tau_body = rotate_inv(state.quat_world, tau)
         self._n += 1
-        self.force_bias += (f - self.force_bias) / self._n
-        self.moment_bias_body += (rotate_inv(state.quat_world, tau) - self.moment_bias_body) / self._n
+        d_f, d_m = f - self.force_bias, tau_body - self.moment_bias_body
+        self.force_bias += d_f / self._n
+        self.moment_bias_body += d_m / self._n
+        self._m2_force += d_f * (f - self.force_bias)
+        self._m2_moment += d_m * (tau_body - self.moment_bias_body)
+        if self._n > 1:
+            self.noise_force = np.sqrt(self._m2_force / (self._n - 1))
+            self.noise_moment = np.sqrt(self._m2_moment / (self._n - 1))
 
-    def update(self, state: ControlState) -> tuple[_Vec, _Vec]:
-        """Filter in this reading (taring first while the timed tare runs); the filtered wrench."""
+    def update(self, state: ControlState, *, free: bool = False) -> tuple[_Vec, _Vec]:
+        """Filter in this reading (taring first while the timed tare runs; following the bias
+        while ``free``); the filtered wrench."""
         if state.t - self._t0 < self.tare_time:
             self.accumulate_tare(state)
+        else:
+            self._track_accel(state)
         f, tau = self.raw(state)
+        if free and self._n:
+            self.force_bias += self._a_bias * f
+            self.moment_bias_body += self._a_bias * rotate_inv(state.quat_world, tau)
         self.force += self._a_force * (f - self.force)
         self.moment += self._a_moment * (tau - self.moment)
         return self.force, self.moment
+
+    def _track_accel(self, state: ControlState) -> None:
+        if not self._a_accel:
+            return
+        v = state.v_world
+        if self._v_prev is not None:
+            self.accel += self._a_accel * ((v - self._v_prev) / self.dt - self.accel)
+        self._v_prev = v.copy()
+
+    def move_centre(self, centre_body: _Vec, state: ControlState) -> None:
+        """Take moments about another point of the gripper frame from now on, keeping the tare
+        (its moment moved with the point) and the filters."""
+        centre = np.asarray(centre_body, dtype=float)
+        f_body = rotate_inv(state.quat_world, self.force_bias)
+        self.moment_bias_body = self.moment_bias_body + cross(self.centre_body - centre, f_body)
+        q = state.quat_world
+        self.moment = self.moment + cross(rotate(q, self.centre_body) - rotate(q, centre), self.force)
+        self.centre_body = centre
 
     def moment_about(self, state: ControlState, point_body: _Vec) -> _Vec:
         """The filtered moment moved to another point of the gripper frame [N m], world."""
@@ -137,27 +218,45 @@ class WristSensor:
         return self.moment + cross(rotate(q, self.centre_body) - rotate(q, point_body), self.force)
 
 
-class ContactSense:
-    """The contact force on the hand from the mount's force/torque sensor: the reading minus its
-    mean while tared (:meth:`accumulate_tare`), sign-flipped, low-passed at ``hz``, world frame.
+class Detector:
+    """A hysteresis test that a filtered estimate has risen past a level, in units of its
+    standard deviation: on once ``value > level + k_on sigma`` has held for ``hold`` [s], off
+    as soon as ``value < level + k_off sigma``. With ``k_on`` = 4 a false detection on Gaussian
+    noise needs a 4-sigma excursion that lasts; the gap to ``k_off`` keeps a detection from
+    chattering on the noise.
 
     Attributes:
-        tare: (3,) The mean reading while tared, world frame [N].
-        force: (3,) The filtered contact force on the hand [N].
+        on: whether the test holds.
+        since: when it last switched on [s] (None while off).
     """
 
-    def __init__(self, control_dt: float = 0.001, hz: float = 30.0) -> None:
-        self.alpha = 1.0 - math.exp(-2.0 * math.pi * hz * control_dt)
-        self.tare = np.zeros(3)
-        self._tare_sum = np.zeros(3)
-        self._tare_n = 0
-        self.force = np.zeros(3)
+    def __init__(self, *, k_on: float = 4.0, k_off: float = 2.0, hold: float = 0.0) -> None:
+        if not k_on > k_off:
+            raise ValueError(f"k_on must exceed k_off, got {k_on} and {k_off}")
+        self.k_on, self.k_off, self.hold = k_on, k_off, hold
+        self.reset()
 
-    def accumulate_tare(self, state: ControlState) -> None:
-        self._tare_sum += ft_world(state)[0]
-        self._tare_n += 1
-        self.tare = self._tare_sum / self._tare_n
+    def reset(self) -> None:
+        self.on = False
+        self.since: float | None = None
+        self._rising: float | None = None
 
-    def update(self, state: ControlState) -> None:
-        contact = -(ft_world(state)[0] - self.tare)
-        self.force += self.alpha * (contact - self.force)
+    def update(self, t: float, value: float, sigma: float, level: float = 0.0) -> bool:
+        """The test at time ``t`` [s] for ``value`` with standard deviation ``sigma``."""
+        if self.on:
+            if value < level + self.k_off * sigma:
+                self.reset()
+            return self.on
+        if value > level + self.k_on * sigma:
+            self._rising = t if self._rising is None else self._rising
+            if t - self._rising >= self.hold - 1e-12:
+                self.on, self.since = True, t
+        else:
+            self._rising = None
+        return self.on
+
+
+def within(value: float, sigma: float, tolerance: float, k: float = 3.0) -> bool:
+    """Whether ``|value|`` is within ``tolerance``, or within ``k`` of its standard deviation
+    ``sigma`` where the noise is wider than the tolerance (no test can be finer than its noise)."""
+    return abs(value) < max(tolerance, k * sigma)

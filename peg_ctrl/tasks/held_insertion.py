@@ -58,7 +58,7 @@ from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
 from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.sim.sensing import ContactSense, WristSensor
+from peg_ctrl.sim.sensing import Detector, WristSensor
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
@@ -77,6 +77,8 @@ from peg_ctrl.tasks.strategies.motions import about
 __all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
 
 _DISTURBANCES = ("lateral_error", "tilt_error", "position_noise")  # >= 0; every other number > 0
+_TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
+_ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,7 +184,7 @@ class HeldInsertionTask(PlannedMoves):
         self.insertion = InsertionMonitor(
             scene, SeatedCriterion(success.min_depth, success.max_lateral_error, success.max_tilt)
         )
-        self._sense = ContactSense(self.control_dt)
+        self.contact = Detector(k_on=4.0, k_off=2.0, hold=_TOUCH_HOLD)
         self.disturbance: Disturbance | None = None
         self.observed_hole = np.zeros(2)  # where the task believes the hole is (x, y) [m]
         self._b_body = np.zeros(3)  # nominal lower end of the peg, gripper frame [m]
@@ -219,11 +221,6 @@ class HeldInsertionTask(PlannedMoves):
     @property
     def records(self) -> list[PhaseRecord]:
         return self.machine.records
-
-    @property
-    def sense(self) -> ContactSense:
-        """The tared, low-passed contact force on the hand (world) [N]."""
-        return self._sense
 
     @property
     def wrist(self) -> WristSensor:
@@ -318,12 +315,14 @@ class HeldInsertionTask(PlannedMoves):
         self._up_body = rotate_inv(q_grip, np.array([0.0, 0.0, 1.0]))
         believed_bottom = pinch + b_world
         self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
-        self._sense = ContactSense(self.control_dt)
+        self.contact.reset()
         self._noise = np.asarray(d.noise, dtype=float)
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
         self.aligned_tilt = None
-        self._wrist = WristSensor(model, centre_body=self._b_body, dt=self.control_dt)
+        self._wrist = WristSensor(
+            model, centre_body=self._b_body, dt=self.control_dt, force_hz=30.0, accel_hz=_ACCEL_HZ
+        )
         self.strategy = self.cfg.strategy.build(self)
         self.machine = PhaseMachine(self.phase_table())
         self.seated.reset()
@@ -405,10 +404,16 @@ class HeldInsertionTask(PlannedMoves):
         """The last goal becomes the present position (a motion ended in contact)."""
         self._goal = Waypoint.of(obs.gripper.p_world, self._goal.quat_world, 0.0)
 
-    def feel(self, obs: Observation) -> None:
-        """Update the sensing with this observation."""
-        self._sense.update(obs.gripper)
-        self.wrist.update(obs.gripper)
+    def feel(self, obs: Observation, *, free: bool = False) -> None:
+        """Update the wrench estimate and the contact detection with this observation; ``free``:
+        the hand is known to be clear of the block, so the estimate follows the sensor's bias."""
+        w = self.wrist
+        force, _ = w.update(obs.gripper, free=free)
+        self.contact.update(obs.t, float(force[2]), float(w.sigma_force[2]))
+
+    def feel_free(self, obs: Observation) -> None:
+        """:meth:`feel`, the hand in the air (a tick for phases that move it clear of the block)."""
+        self.feel(obs, free=True)
 
     def in_bore(self, obs: Observation) -> str | None:
         """``"entered"`` once the believed lower end is past the chamfer, else None."""
@@ -418,7 +423,6 @@ class HeldInsertionTask(PlannedMoves):
         return self._move(self._goal)
 
     def _tare(self, obs: Observation) -> None:
-        self._sense.accumulate_tare(obs.gripper)
         self.wrist.accumulate_tare(obs.gripper)
 
     def _settled(self, obs: Observation) -> str | None:

@@ -32,6 +32,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.planners.base import Waypoint
 from peg_ctrl.sim.scene import SceneConfig
+from peg_ctrl.sim.sensing import within
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.strategies.base import (
@@ -60,9 +61,11 @@ class AlignConfig(StrategyConfig):
     phases: ClassVar[tuple[str, ...]] = ("approach", "touch", "align", "transfer", "search", "insert")
     datum_offset: float = 0.03  # the datum touch, this far from the observed hole towards -x, -y [m]
     touch_gap: float = 0.0012  # the approach stops the lower end this far above the face [m]
-    touch_force: float = 0.6  # light press: touching the datum, every search hop [N]
+    touch_force: float = 0.6  # light press: touching the datum, every search hop [N] (more with a
+    # noisy sensor: twice what the contact detection needs)
     align_force: float = 3.0  # press while the peg turns flat [N]
-    align_tolerance: float = 0.002  # flat once the moment about the tip stays below this [N m]
+    align_tolerance: float = 0.002  # flat once the moment about the tip stays below this, or
+    # within 3 sigma of its noise where that is wider [N m]
     align_time: float = 4.0  # budget of the alignment [s]
     search_pitch: float = 0.0016  # hexagonal lattice pitch [m] (<= sqrt(3) x the capture range)
     search_radius: float = 0.0045  # the lattice's radius about the observed hole [m]
@@ -135,7 +138,9 @@ class AlignStrategy(Strategy):
     def phase_table(self) -> dict[str, PhaseSpec]:
         c, t = self.cfg, self.task
         return {
-            "approach": PhaseSpec(self._enter_datum, self._motion_done, "touch", Timeout(1.0, True)),
+            "approach": PhaseSpec(
+                self._enter_datum, self._motion_done, "touch", Timeout(1.0, True), tick=t.feel_free
+            ),
             "touch": PhaseSpec(
                 self._enter_touch, self._touched_datum, self._after_touch, Timeout(2.0), tick=t.feel
             ),
@@ -183,16 +188,23 @@ class AlignStrategy(Strategy):
         tip = np.array([t.observed_hole[0] - off, t.observed_hole[1] - off, t.block_top + c.touch_gap])
         return t.move(self._tip_waypoint(tip, q))
 
+    def _press_force(self) -> float:
+        """``touch_force``, or more where the sensor is noisier: twice what the contact detection
+        needs to see a push [N]."""
+        t = self.task
+        return max(self.cfg.touch_force, 2.0 * t.contact.k_on * float(t.wrist.sigma_force[2]))
+
     def _enter_touch(self, obs: Observation) -> Motion:
         self._flat_since = None
-        return self._held(self._press_here(obs, self.cfg.touch_force, _PRESS_AXES))
+        return self._held(self._press_here(obs, self._press_force(), _PRESS_AXES))
 
     def _touched_datum(self, obs: Observation) -> str | None:
-        """Contact: the sensed push lasts 20 ms (the sensor also reads the hand's accelerations)."""
+        """Contact: the task's detection holds 10 ms more, 50 ms into the phase (the sensor also
+        reads the hand's own accelerations)."""
         t = self.task
-        pressed = t.machine.elapsed(obs.t) > 0.05 and t.wrist.force[2] > 0.8 * self.cfg.touch_force
+        pressed = t.machine.elapsed(obs.t) > 0.05 and t.contact.on
         self._flat_since = (self._flat_since or obs.t) if pressed else None
-        return "contact" if self._flat_since is not None and obs.t - self._flat_since >= 0.02 else None
+        return "contact" if self._flat_since is not None and obs.t - self._flat_since >= 0.01 else None
 
     def _after_touch(self, obs: Observation) -> str:
         return "align" if self._flat_since is not None else DONE
@@ -207,15 +219,17 @@ class AlignStrategy(Strategy):
         t = self.task
         now = obs.t
         if self._settle_from is None:
-            m = t.wrist.moment
-            pressed = t.wrist.force[2] > 0.5 * self.cfg.align_force  # flat on the face, not in the air
+            w = t.wrist
+            m, sigma = w.moment, float(np.hypot(*w.sigma_moment[:2]))
             flat = (
-                pressed and t.machine.elapsed(now) > 0.2 and math.hypot(m[0], m[1]) < self.cfg.align_tolerance
+                t.contact.on  # on the face, not in the air
+                and t.machine.elapsed(now) > 0.2
+                and within(math.hypot(m[0], m[1]), sigma, self.cfg.align_tolerance)
             )
             self._flat_since = (self._flat_since or now) if flat else None
             if self._flat_since is not None and now - self._flat_since >= 0.1:
                 self._settle_from = now
-                self._hold.target = self._press_here(obs, self.cfg.touch_force, _PRESS_AXES)
+                self._hold.target = self._press_here(obs, self._press_force(), _PRESS_AXES)
             return None
         return "flat" if now - self._settle_from >= 0.15 else None
 
@@ -239,7 +253,7 @@ class AlignStrategy(Strategy):
     def _enter_hop_search(self, obs: Observation) -> Motion:
         t, c, a = self.task, self.cfg, self.task.scene.assets
         settings = HopSettings(
-            press_force=c.touch_force,
+            press_force=self._press_force(),
             hover=c.hop_hover,
             lift=c.hop_lift,
             hop_speed=c.hop_speed,
@@ -266,7 +280,7 @@ class AlignStrategy(Strategy):
         t = self.task
         t.feel(obs)
         assert self.search is not None
-        self.search.step(obs.t, t.believed_bottom(obs), t.wrist.force, t.wrist.moment)
+        self.search.step(obs.t, t.believed_bottom(obs), t.wrist.force, t.wrist.moment, t.contact.on)
 
     def _found(self, obs: Observation) -> str | None:
         if self.task.in_bore(obs):

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.sim.scene import SceneConfig
-from peg_ctrl.sim.sensing import ContactSense, WristSensor
+from peg_ctrl.sim.sensing import Detector, WristSensor
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseMachine, PhaseSpec
 from peg_ctrl.tasks.strategies.motions import Pressing
@@ -68,9 +68,12 @@ class HeldInsertion(Protocol):
     Geometry from the drawing [m]: ``block_top`` (the hole's mouth), ``radius`` (the peg's),
     ``hole_radius`` and ``chamfer``. Belief: ``observed_hole`` (x, y) [m] and ``z_face`` [m],
     which a strategy may revise (:meth:`recalibrate`). Motion: ``goal`` (the last planned
-    waypoint), :meth:`move` plans from it; ``planner``, ``limits``. Sensing: ``sense`` (the
-    tared contact force on the hand), ``wrist`` (the contact wrench about the peg's believed
-    lower end); :meth:`feel` updates both. ``machine`` is the phase machine (time in phase).
+    waypoint), :meth:`move` plans from it; ``planner``, ``limits``. Sensing: ``wrist`` (the
+    estimated contact wrench about the peg's believed lower end, with its noise:
+    :class:`~peg_ctrl.sim.sensing.WristSensor`) and ``contact`` (the detection of a push on the
+    hand from it, k sigma with hysteresis); :meth:`feel` updates both (``feel_free`` while the
+    hand is clear of the block, so the estimate follows the sensor's bias). ``machine`` is the
+    phase machine (time in phase).
     """
 
     scene: SceneConfig
@@ -86,8 +89,7 @@ class HeldInsertion(Protocol):
     z_face: float
     machine: PhaseMachine
 
-    @property
-    def sense(self) -> ContactSense: ...
+    contact: Detector
 
     @property
     def wrist(self) -> WristSensor: ...
@@ -121,7 +123,9 @@ class HeldInsertion(Protocol):
 
     def in_bore(self, obs: Observation) -> str | None: ...
 
-    def feel(self, obs: Observation) -> None: ...
+    def feel(self, obs: Observation, *, free: bool = False) -> None: ...
+
+    def feel_free(self, obs: Observation) -> None: ...
 
     def recalibrate(self, obs: Observation) -> None: ...
 
@@ -149,7 +153,7 @@ class PushIn:
         return self._pressing
 
     def govern(self, obs: Observation) -> None:
-        self.task.sense.update(obs.gripper)
+        self.task.feel(obs)
         excess = max(0.0, -float(obs.gripper.v_world[2]) - self.speed)
         self._pressing.set_force(self.force * max(0.0, 1.0 - excess / self.speed))
 

@@ -1,10 +1,11 @@
 """``force``: a guarded descent, then a force-regulated push.
 
 Phases: ``approach`` (over the observed hole) → ``descend`` (Ruckig, at ``descent_speed``, until
-the sensed contact force exceeds ``contact_force``, or the lower end is believed in the bore:
-the chamfer guided it in) → ``insert``: a push at ``insert_force`` with the lateral position
-held, easing off above ``insert_speed`` of descent, for at most ``insert_time``. A descent that
-meets nothing by the end of its motion (and 1 s) goes on to ``insert`` as well.
+the task's contact detection fires — a push on the hand k sigma above the sensor's noise — or the
+lower end is believed in the bore: the chamfer guided it in) → ``insert``: a push at
+``insert_force`` with the lateral position held, easing off above ``insert_speed`` of descent,
+for at most ``insert_time``. A descent that meets nothing by the end of its motion (and 1 s) goes
+on to ``insert`` as well.
 
 :class:`ForceStrategy` is also the base of ``spiral`` and ``tilt``: they share the approach,
 the guarded descent and the push, and search between the last two.
@@ -30,7 +31,6 @@ class ForceConfig(StrategyConfig):
     name: ClassVar[str] = "force"
     phases: ClassVar[tuple[str, ...]] = ("approach", "descend", "insert")
     descent_speed: float = 0.005  # guarded descent [m/s]
-    contact_force: float = 1.5  # sensed force that counts as contact [N]
     insert_force: float = 3.0  # force-regulated push [N]
     insert_speed: float = 0.01  # above this descent speed the push eases off, to 0 N at twice it [m/s]
     seat_margin: float = 0.002  # the descent aims this far below the seated depth [m]
@@ -53,7 +53,9 @@ class ForceStrategy(Strategy):
     def phase_table(self) -> dict[str, PhaseSpec]:
         t = self.task
         return {
-            "approach": PhaseSpec(self._enter_approach, self._motion_done, "descend", Timeout(1.0, True)),
+            "approach": PhaseSpec(
+                self._enter_approach, self._motion_done, "descend", Timeout(1.0, True), tick=t.feel_free
+            ),
             "descend": PhaseSpec(
                 self._enter_descend, self._touched, self._after_descend, Timeout(1.0, True), tick=t.feel
             ),
@@ -76,7 +78,7 @@ class ForceStrategy(Strategy):
         t = self.task
         if t.in_bore(obs):
             return "entered"  # the chamfer guided the peg in: push
-        if t.sense.force[2] > self.cfg.contact_force:
+        if t.contact.on:
             return "contact"
         return "no_contact" if t.machine.motion_over(obs.t) else None
 

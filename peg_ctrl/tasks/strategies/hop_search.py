@@ -155,9 +155,10 @@ class HopSearch:
         self._t0 = t
         self.hops += 1
 
-    def step(self, t: float, tip: _Vec, force: _Vec, moment_tip: _Vec) -> None:
-        """Advance with the believed lower end ``tip`` [m] and the sensed contact force on the
-        hand [N] and its moment about the lower end [N m] (world)."""
+    def step(self, t: float, tip: _Vec, force: _Vec, moment_tip: _Vec, touching: bool) -> None:
+        """Advance with the believed lower end ``tip`` [m], the estimated contact force on the
+        hand [N] and its moment about the lower end [N m] (world), and whether the estimate
+        says the hand is pushed (``touching``: the task's contact detection)."""
         s = self.s
         elapsed = t - self._t0
         if self._state in ("move", "to_chamfer"):
@@ -174,10 +175,10 @@ class HopSearch:
                 self._xy = np.asarray(tip[:2], dtype=float)
                 self._target = self._press(PRESS_AXES)
             return
-        # press: contact is a force that lasts, with the peg's end down at the face or below
+        # press: contact is a detected push, with the peg's end down at the face or below
         # (the sensor also reads the hand's own deceleration at the end of a hop)
         drop = self.z_face - float(tip[2])
-        pressed = force[2] > 0.8 * s.press_force and drop > -0.5 * s.hover
+        pressed = touching and drop > -0.5 * s.hover
         if self._contact_t is None or not self._confirmed:
             if not pressed:
                 self._contact_t = None

@@ -66,7 +66,7 @@ def _run(search: HopSearch, drop: float, moment: tuple[float, float], until: flo
         pressing = target.force_controlled
         tip[2] = Z_FACE - drop if pressing else tip[2]
         force = np.array([0.0, 0.0, SETTINGS.press_force if pressing else 0.0])
-        search.step(t, tip, force, np.array([*moment, 0.0]) * force[2])
+        search.step(t, tip, force, np.array([*moment, 0.0]) * force[2], pressing)
         t += DT
     return t
 
