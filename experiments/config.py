@@ -293,7 +293,17 @@ def expand(exp: ExperimentConfig) -> list[Job]:
                         for seed in exp.seeds:
                             cfg = dataclasses.replace(cell_cfg, seed=seed)
                             jobs.append(
-                                Job(episode_key(cfg), spec.name, label, planner, clearance, seed, cfg, name, cell)
+                                Job(
+                                    episode_key(cfg),
+                                    spec.name,
+                                    label,
+                                    planner,
+                                    clearance,
+                                    seed,
+                                    cfg,
+                                    name,
+                                    cell,
+                                )
                             )
     if len({j.key for j in jobs}) != len(jobs):
         raise ConfigError("the experiment lists the same episode twice (repeated controllers or clearances?)")
