@@ -7,7 +7,7 @@ and centre of mass taken from the model at the home pose, and moves the moment t
 the gripper frame (a centre of compliance; for the held peg, its lower end)::
 
     F_c   = m_h (a_ref - g) - f_s                                  contact force on the hand [N]
-    tau_c = -t_s - (r_com - r_s) x m_h g + (r_s - c) x F_c         its moment about c [N m]
+    tau_c = -t_s + (r_com - r_s) x m_h (a_ref - g) + (r_s - c) x F_c   its moment about c [N m]
 
 (``f_s``, ``t_s`` the sensor's world-frame reading; ``r_s``, ``r_com``, ``c`` the sensor site,
 the hand's centre of mass and the point, from the pinch point.) What the model does not know —
@@ -65,8 +65,8 @@ class WristModel:
         site = rotate(q, self.site_body)  # relative to the pinch point
         com = rotate(q, self.com_body)
         centre = rotate(q, centre_body)
-        weight = self.mass * self.gravity
-        tau = -t_world - cross(com - site, weight) + cross(site - centre, f_ext)
+        inertia = self.mass * (accel_ref - self.gravity)  # the hand's weight and inertia [N]
+        tau = -t_world + cross(com - site, inertia) + cross(site - centre, f_ext)
         return f_ext, tau
 
 

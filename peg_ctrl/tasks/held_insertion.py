@@ -59,6 +59,7 @@ from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_hel
 from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor
+from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
@@ -79,6 +80,7 @@ __all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
 _DISTURBANCES = ("lateral_error", "tilt_error", "position_noise")  # >= 0; every other number > 0
 _TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
 _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
+_SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -316,6 +318,8 @@ class HeldInsertionTask(PlannedMoves):
         believed_bottom = pinch + b_world
         self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
         self.contact.reset()
+        self._v_samples: list[float] = []
+        self._v_noise = 0.0  # standard deviation of the sensed vertical speed [m/s]
         self._noise = np.asarray(d.noise, dtype=float)
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
@@ -381,20 +385,41 @@ class HeldInsertionTask(PlannedMoves):
         """The pinch position that puts the believed lower end at ``bottom`` with orientation ``q_grip``."""
         return bottom - rotate(q_grip, self._b_body)
 
-    def recalibrate(self, obs: Observation) -> None:
-        """The peg's end lies flat on the face: its axis is vertical now. The pads still hold it
-        where they did, so the lower end is ``_grip_length`` below them along that axis; the
-        face's height follows, and so does the hole (the task believes the peg started centred)."""
-        q = obs.gripper.quat_world
-        up_body = rotate_inv(q, np.array([0.0, 0.0, 1.0]))
+    @property
+    def grasp_body(self) -> NDArray[np.float64]:
+        """Where the pads hold the peg's axis, gripper frame [m] (a copy)."""
+        return self._grasp_body.copy()
+
+    @property
+    def grip_length(self) -> float:
+        """From the pads to the peg's lower end, along its axis [m]."""
+        return self._grip_length
+
+    @property
+    def up_body(self) -> NDArray[np.float64]:
+        """The peg's axis (up) as the task believes it, gripper frame (a copy)."""
+        return self._up_body.copy()
+
+    def revise_axis(self, up_body: NDArray[np.float64], state: ControlState) -> None:
+        """A calibration found the peg's axis in the hand (``up_body``, gripper frame). The pads
+        still hold it where they did, so the lower end is ``grip_length`` below them along it;
+        the hole follows (the task believes the peg started centred)."""
+        up_body = np.asarray(up_body, dtype=float) / np.linalg.norm(up_body)
         self.aligned_tilt = math.acos(max(-1.0, min(1.0, float(np.dot(up_body, self._up_body)))))
         self._up_body = up_body
         self._b_body = self._grasp_body - self._grip_length * up_body
-        self.wrist.centre_body = self._b_body
-        self.z_face = float(self.believed_bottom(obs)[2])
+        self.wrist.move_centre(self._b_body, state)
         start = self._start
         start_tip = np.asarray(start.p_world) + rotate(np.asarray(start.quat_world), self._b_body)
         self.observed_hole = start_tip[:2] + self._noise
+
+    def recalibrate(self, obs: Observation, *, quat: NDArray[np.float64] | None = None) -> None:
+        """The peg's end lies flat on the face: its axis is vertical now (with the gripper at
+        ``quat``, by default as observed): :meth:`revise_axis`, and the face's height is the
+        believed lower end's."""
+        q = obs.gripper.quat_world if quat is None else quat
+        self.revise_axis(rotate_inv(q, np.array([0.0, 0.0, 1.0])), obs.gripper)
+        self.z_face = float(self.believed_bottom(obs)[2])
 
     # -- motions, hooks and guards the strategies share --------------------------------------------
     def move(self, goal: Waypoint, limits: MotionLimits | None = None) -> Motion:
@@ -415,6 +440,20 @@ class HeldInsertionTask(PlannedMoves):
         """:meth:`feel`, the hand in the air (a tick for phases that move it clear of the block)."""
         self.feel(obs, free=True)
 
+    @property
+    def speed_noise(self) -> float:
+        """Standard deviation of the sensed vertical speed, measured while tared [m/s]."""
+        return self._v_noise
+
+    def seated_detected(self, obs: Observation) -> bool:
+        """The task's own judgement that the peg is seated: its believed depth reaches the
+        success depth and the hand has stopped, its vertical speed within k sigma of the speed
+        sensing's noise (measured while tared)."""
+        if self.believed_depth(obs) < self.min_depth:
+            return False
+        sigma = max(self._v_noise, _SPEED_RESOLUTION)
+        return abs(float(obs.gripper.v_world[2])) < self.contact.k_on * sigma
+
     def in_bore(self, obs: Observation) -> str | None:
         """``"entered"`` once the believed lower end is past the chamfer, else None."""
         return "entered" if self.believed_depth(obs) > self.chamfer + ENTRY_MARGIN else None
@@ -423,7 +462,11 @@ class HeldInsertionTask(PlannedMoves):
         return self._move(self._goal)
 
     def _tare(self, obs: Observation) -> None:
+        """Tare the wrench estimate; measure the speed sensing's noise (the hand is at rest)."""
         self.wrist.accumulate_tare(obs.gripper)
+        self._v_samples.append(float(obs.gripper.v_world[2]))
+        if len(self._v_samples) > 1:
+            self._v_noise = float(np.std(self._v_samples, ddof=1))
 
     def _settled(self, obs: Observation) -> str | None:
         return "ok" if self.machine.elapsed(obs.t) >= self.cfg.settle_time else None

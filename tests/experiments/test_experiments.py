@@ -287,7 +287,7 @@ def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: unknown strategy 'poke'; known: align, force, spiral, straight, tilt",
+            "strategies[0]: unknown strategy 'poke'; known: align, force, probe, spiral, straight, tilt",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",

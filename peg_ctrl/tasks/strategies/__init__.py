@@ -20,6 +20,7 @@ from peg_ctrl.tasks.strategies.base import (
     TaskDisturbance,
 )
 from peg_ctrl.tasks.strategies.force import ForceConfig, ForceStrategy
+from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
 from peg_ctrl.tasks.strategies.spiral import SpiralConfig, SpiralStrategy
 from peg_ctrl.tasks.strategies.straight import StraightConfig, StraightStrategy
 from peg_ctrl.tasks.strategies.tilt import TiltConfig, TiltStrategy
@@ -36,6 +37,8 @@ __all__ = [
     "AlignStrategy",
     "ForceConfig",
     "ForceStrategy",
+    "ProbeConfig",
+    "ProbeStrategy",
     "SpiralConfig",
     "SpiralStrategy",
     "StraightConfig",
@@ -49,7 +52,7 @@ __all__ = [
 
 #: Strategy name -> its config class (whose ``build(task)`` makes the strategy).
 STRATEGIES: dict[str, type[StrategyConfig]] = {
-    cfg.name: cfg for cfg in (StraightConfig, ForceConfig, SpiralConfig, TiltConfig, AlignConfig)
+    cfg.name: cfg for cfg in (StraightConfig, ForceConfig, SpiralConfig, TiltConfig, AlignConfig, ProbeConfig)
 }
 
 

@@ -26,6 +26,7 @@ from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor
+from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseMachine, PhaseSpec
 from peg_ctrl.tasks.strategies.motions import Pressing
@@ -95,6 +96,9 @@ class HeldInsertion(Protocol):
     def wrist(self) -> WristSensor: ...
 
     @property
+    def speed_noise(self) -> float: ...
+
+    @property
     def goal(self) -> Waypoint: ...
 
     @goal.setter
@@ -123,11 +127,24 @@ class HeldInsertion(Protocol):
 
     def in_bore(self, obs: Observation) -> str | None: ...
 
+    def seated_detected(self, obs: Observation) -> bool: ...
+
     def feel(self, obs: Observation, *, free: bool = False) -> None: ...
 
     def feel_free(self, obs: Observation) -> None: ...
 
-    def recalibrate(self, obs: Observation) -> None: ...
+    def recalibrate(self, obs: Observation, *, quat: _Vec | None = None) -> None: ...
+
+    @property
+    def grasp_body(self) -> _Vec: ...
+
+    @property
+    def grip_length(self) -> float: ...
+
+    @property
+    def up_body(self) -> _Vec: ...
+
+    def revise_axis(self, up_body: _Vec, state: ControlState) -> None: ...
 
 
 def never(obs: Observation) -> None:

@@ -16,7 +16,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.planners.base import Waypoint
 from peg_ctrl.tasks.phases import Motion
 
-__all__ = ["Hold", "Pressing", "Pressed", "Spiral", "Slide", "down", "about"]
+__all__ = ["Guided", "Hold", "Pressing", "Pressed", "Spiral", "Slide", "down", "about"]
 
 _Vec = NDArray[np.float64]
 
@@ -83,6 +83,21 @@ class Pressed:
 
     def sample(self, t: float) -> GripperTarget:
         return self.trajectory.sample(t).with_force(self._force)
+
+
+class Guided:
+    """A planned motion with the flagged ``axes`` (6 booleans) wrench-controlled at zero: those
+    axes follow whatever guides them (a bore, a chamfer), the others track the plan, which
+    starts after a dwell of ``delay`` [s] at its first pose."""
+
+    def __init__(self, trajectory: Motion, axes: tuple[bool, ...], *, delay: float = 0.0) -> None:
+        self.trajectory = trajectory
+        self.delay = delay
+        self.duration = delay + trajectory.duration
+        self._axes = np.asarray(axes, dtype=bool)
+
+    def sample(self, t: float) -> GripperTarget:
+        return self.trajectory.sample(max(0.0, t - self.delay)).with_wrench(np.zeros(3), axes=self._axes)
 
 
 class Spiral:
