@@ -16,7 +16,8 @@ about the tip::
     commanded pose: turned by phi about the centre of the reference, then shifted by x;
     tracked by the ``pd`` controller.
 
-(:mod:`peg_ctrl.sim.sensing` computes ``F_ext`` and ``tau_ext``.) Force-controlled axes
+(:class:`peg_ctrl.sim.sensing.WristSensor` estimates ``F_ext`` and ``tau_ext``: the tare and
+the filters below are its.) Force-controlled axes
 (``target.force_axes``: flagged in ``target.wrench_axes`` or a non-zero ``target.force_world``
 entry) are regulated in closed loop with the sensor (an accommodation law): the command along the
 axis starts at the measured position when the axis becomes force-controlled and moves as
@@ -63,8 +64,8 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.sim.jaw import JawCalibration
-from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.sim.sensing import WristModel, lowpass_alpha
+from peg_ctrl.sim.rotations import cross, quat_mul, rotate
+from peg_ctrl.sim.sensing import WristSensor
 from peg_ctrl.sim.state import ControlState
 
 __all__ = ["AdmittanceConfig", "AdmittanceController", "AdmittanceLoop"]
@@ -114,13 +115,12 @@ class AdmittanceLoop:
     target an inner controller tracks. See the module docstring.
 
     Attributes:
+        sensor: The estimator of the contact wrench (tare, filters: ``filter_hz`` on the force
+            and, as its fast moment, the torque; ``moment_filter_hz`` on its moment).
         offset: (3,) Current yield of the command, world frame [m].
         offset_rate: (3,) Its rate [m/s].
         rotation: (3,) Current turn of the command about the centre of compliance, world [rad].
         turn: (3,) Turn on the moment-controlled axes, world [rad].
-        force_filtered: (3,) Low-passed external force, world frame [N].
-        torque_filtered: (3,) Low-passed external torque about the centre, world frame [N m].
-        moment_filtered: (3,) The same torque through the slower moment filter [N m].
     """
 
     def __init__(
@@ -132,12 +132,18 @@ class AdmittanceLoop:
         # own PD) or, bumpless, at the target's (an inner loop with a velocity feed-forward, like
         # the IK, would otherwise turn the step of its static error into a velocity kick).
         self.bumpless = bumpless
-        self.wrist = WristModel(model)
         self._centre_body = np.asarray(c.compliance_center, dtype=float)
+        self.sensor = WristSensor(
+            model,
+            centre_body=self._centre_body,
+            dt=control_dt,
+            force_hz=c.filter_hz,
+            moment_hz=c.moment_filter_hz,
+            tare_time=c.tare_time,
+            fast_moment=True,
+        )
         self._d = 2.0 * c.damping_ratio * math.sqrt(c.stiffness * c.mass)
         self._d_rot = 2.0 * c.damping_ratio * math.sqrt(c.rot_stiffness * c.rot_inertia)
-        self._alpha = lowpass_alpha(c.filter_hz, control_dt)
-        self._alpha_m = lowpass_alpha(c.moment_filter_hz, control_dt)
         self.reset(None)
 
     def reset(self, state: ControlState | None) -> None:
@@ -147,41 +153,40 @@ class AdmittanceLoop:
         self.rotation = np.zeros(3)
         self.rotation_rate = np.zeros(3)
         self.turn = np.zeros(3)
-        self.force_filtered = np.zeros(3)
-        self.torque_filtered = np.zeros(3)
-        self.moment_filtered = np.zeros(3)
         self._force_axes = np.zeros(3, dtype=bool)
         self._setpoint = np.zeros(3)  # command along force-controlled axes [m]
         self._setpoint_rate = np.zeros(3)
         self._prev_v_ref: np.ndarray | None = None
-        self._t0 = state.t if state is not None else 0.0
-        self._tares = 0
-        self._force_bias = np.zeros(3)
-        self._torque_bias_body = np.zeros(3)
+        self.sensor.reset(state)
+
+    @property
+    def force_filtered(self) -> np.ndarray:
+        """(3,) Low-passed external force, world frame [N]."""
+        return self.sensor.force
+
+    @property
+    def torque_filtered(self) -> np.ndarray:
+        """(3,) Low-passed external torque about the centre, world frame [N m] (``filter_hz``)."""
+        return self.sensor.moment_fast
+
+    @property
+    def moment_filtered(self) -> np.ndarray:
+        """(3,) The same torque through the slower moment filter (``moment_filter_hz``) [N m]."""
+        return self.sensor.moment
 
     def external_wrench(self, state: ControlState, accel_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and its torque about the centre of compliance [N m], world frame
         (unfiltered; tared once a tare was taken)."""
-        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
-        if self._tares:
-            f_ext = f_ext - self._force_bias
-            tau = tau - rotate(state.quat_world, self._torque_bias_body)
-        return f_ext, tau
-
-    def _tare(self, state: ControlState, accel_ref: np.ndarray) -> None:
-        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
-        self._tares += 1
-        self._force_bias += (f_ext - self._force_bias) / self._tares
-        self._torque_bias_body += (rotate_inv(state.quat_world, tau) - self._torque_bias_body) / self._tares
+        return self.sensor.raw(state, accel_ref=accel_ref)
 
     def shape(self, state: ControlState, target: GripperTarget) -> GripperTarget:
         """The target shifted by the admittance, for the inner controller."""
         c = self.config
         v_ref = np.asarray(target.v_world)
-        tau_ext = self._sense(state, v_ref)
+        self._sense(state, v_ref)
         self._translate(state, target)
         angle = self._rotate_compliantly() if c.rotational else 0.0
-        total, turn_rate = self._turn(tau_ext, target)
+        total, turn_rate = self._turn(target)
         if total is not None:
             total = total + self.rotation if c.rotational else total
             angle = float(np.linalg.norm(total))
@@ -190,17 +195,12 @@ class AdmittanceLoop:
             total, rate = self.rotation, self.rotation_rate
         return self._command(target, v_ref, total, rate, angle)
 
-    def _sense(self, state: ControlState, v_ref: np.ndarray) -> np.ndarray:
-        """Tare (in the first ``tare_time``), filter the contact wrench; the unfiltered torque."""
+    def _sense(self, state: ControlState, v_ref: np.ndarray) -> None:
+        """Tare (in the first ``tare_time``), filter the contact wrench, compensating the
+        reference's acceleration."""
         accel_ref = np.zeros(3) if self._prev_v_ref is None else (v_ref - self._prev_v_ref) / self.dt
         self._prev_v_ref = v_ref.copy()
-        if state.t - self._t0 < self.config.tare_time:
-            self._tare(state, accel_ref)
-        f_ext, tau_ext = self.external_wrench(state, accel_ref)
-        a = self._alpha
-        self.force_filtered += a * (f_ext - self.force_filtered)
-        self.torque_filtered += a * (tau_ext - self.torque_filtered)
-        return tau_ext
+        self.sensor.update(state, accel_ref=accel_ref)
 
     def _translate(self, state: ControlState, target: GripperTarget) -> None:
         """Translation: a spring-damper to the reference, except along force-controlled axes,
@@ -268,11 +268,10 @@ class AdmittanceLoop:
             v_cmd = np.where(axes, self._setpoint_rate, v_cmd)
         return GripperTarget.trusted(p_cmd, q_cmd, v_cmd, omega, target.jaw_sep_m)
 
-    def _turn(self, tau_ext: np.ndarray, target: GripperTarget) -> tuple[np.ndarray | None, np.ndarray]:
+    def _turn(self, target: GripperTarget) -> tuple[np.ndarray | None, np.ndarray]:
         """Advance the turn on the moment-controlled axes; (turn or None when there is none, rate)."""
         c = self.config
         axes = target.moment_axes
-        self.moment_filtered += self._alpha_m * (tau_ext - self.moment_filtered)
         if not axes.any():
             self.turn[:] = 0.0
             return None, np.zeros(3)

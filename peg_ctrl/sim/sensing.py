@@ -91,11 +91,15 @@ class WristSensor:
       and inertia the model leaves over, and the reading of a noise-free sensor, are not zero).
     - **Acceleration.** The hand's inertia is compensated along its measured acceleration (the
       finite difference of the sensed velocity, low-passed at ``accel_hz``), so a hop or a stop
-      does not read as a touch.
+      does not read as a touch; or along an acceleration the caller knows (``accel_ref``, e.g. the
+      reference's: :meth:`update`, :meth:`raw` and :meth:`accumulate_tare` take it).
 
     Attributes:
         force: (3,) filtered contact force on the hand, world frame [N].
         moment: (3,) filtered moment of the contact about the point, world frame [N m].
+        moment_fast: (3,) the same moment through the force's filter (``force_hz``), with
+            ``fast_moment`` (a loop that needs a quicker moment than ``moment_hz`` gives); zero
+            otherwise.
         force_bias: (3,) the force bias, world frame [N]; moment_bias_body (3,) the moment's,
             gripper frame [N m].
         noise_force: (3,) standard deviation of one force reading, world axes [N] (0 before a tare).
@@ -114,6 +118,7 @@ class WristSensor:
         accel_hz: float = 0.0,
         bias_time: float = 1.0,
         resolution: tuple[float, float] = (0.05, 5e-4),
+        fast_moment: bool = False,
     ) -> None:
         self.wrist = WristModel(model)
         self.centre_body = np.asarray(centre_body, dtype=float)
@@ -127,6 +132,7 @@ class WristSensor:
         self._gain_force = self._a_force / (2.0 - self._a_force)
         self._gain_moment = self._a_moment / (2.0 - self._a_moment)
         self.resolution = resolution
+        self.fast_moment = fast_moment
         self._zero = np.zeros(3)
         self.reset(None)
 
@@ -142,6 +148,7 @@ class WristSensor:
         self.noise_moment = np.zeros(3)
         self.force = np.zeros(3)
         self.moment = np.zeros(3)
+        self.moment_fast = np.zeros(3)
         self.accel = np.zeros(3)
         self._v_prev: _Vec | None = None
 
@@ -155,19 +162,23 @@ class WristSensor:
         """(3,) Standard deviation of the filtered moment [N m]."""
         return np.sqrt(self.noise_moment**2 * self._gain_moment + self.resolution[1] ** 2)
 
-    def _wrench(self, state: ControlState) -> tuple[_Vec, _Vec]:
-        return self.wrist.contact_wrench(state, self.centre_body, self.accel if self._a_accel else self._zero)
+    def _wrench(self, state: ControlState, accel_ref: _Vec | None) -> tuple[_Vec, _Vec]:
+        if accel_ref is None:
+            accel_ref = self.accel if self._a_accel else self._zero
+        return self.wrist.contact_wrench(state, self.centre_body, accel_ref)
 
-    def raw(self, state: ControlState) -> tuple[_Vec, _Vec]:
-        """The tared, unfiltered wrench (force [N], moment [N m], world)."""
-        f, tau = self._wrench(state)
+    def raw(self, state: ControlState, *, accel_ref: _Vec | None = None) -> tuple[_Vec, _Vec]:
+        """The tared, unfiltered wrench (force [N], moment [N m], world). ``accel_ref`` (3,)
+        [m/s^2]: the hand's acceleration to compensate; None: the measured one (``accel_hz``),
+        or zero."""
+        f, tau = self._wrench(state, accel_ref)
         return f - self.force_bias, tau - rotate(state.quat_world, self.moment_bias_body)
 
-    def accumulate_tare(self, state: ControlState) -> None:
+    def accumulate_tare(self, state: ControlState, *, accel_ref: _Vec | None = None) -> None:
         """Add this reading to the tare and the noise estimate (the hand must be free of
         contact and at rest)."""
         self._track_accel(state)
-        f, tau = self._wrench(state)
+        f, tau = self._wrench(state, accel_ref)
         tau_body = rotate_inv(state.quat_world, tau)
         self._n += 1
         d_f, d_m = f - self.force_bias, tau_body - self.moment_bias_body
@@ -179,19 +190,23 @@ class WristSensor:
             self.noise_force = np.sqrt(self._m2_force / (self._n - 1))
             self.noise_moment = np.sqrt(self._m2_moment / (self._n - 1))
 
-    def update(self, state: ControlState, *, free: bool = False) -> tuple[_Vec, _Vec]:
+    def update(
+        self, state: ControlState, *, free: bool = False, accel_ref: _Vec | None = None
+    ) -> tuple[_Vec, _Vec]:
         """Filter in this reading (taring first while the timed tare runs; following the bias
-        while ``free``); the filtered wrench."""
+        while ``free``); the filtered wrench. ``accel_ref`` as for :meth:`raw`."""
         if state.t - self._t0 < self.tare_time:
-            self.accumulate_tare(state)
+            self.accumulate_tare(state, accel_ref=accel_ref)
         else:
             self._track_accel(state)
-        f, tau = self.raw(state)
+        f, tau = self.raw(state, accel_ref=accel_ref)
         if free and self._n:
             self.force_bias += self._a_bias * f
             self.moment_bias_body += self._a_bias * rotate_inv(state.quat_world, tau)
         self.force += self._a_force * (f - self.force)
         self.moment += self._a_moment * (tau - self.moment)
+        if self.fast_moment:
+            self.moment_fast += self._a_force * (tau - self.moment_fast)
         return self.force, self.moment
 
     def _track_accel(self, state: ControlState) -> None:
@@ -209,7 +224,10 @@ class WristSensor:
         f_body = rotate_inv(state.quat_world, self.force_bias)
         self.moment_bias_body = self.moment_bias_body + cross(self.centre_body - centre, f_body)
         q = state.quat_world
-        self.moment = self.moment + cross(rotate(q, self.centre_body) - rotate(q, centre), self.force)
+        arm = rotate(q, self.centre_body) - rotate(q, centre)
+        self.moment = self.moment + cross(arm, self.force)
+        if self.fast_moment:
+            self.moment_fast = self.moment_fast + cross(arm, self.force)
         self.centre_body = centre
 
     def moment_about(self, state: ControlState, point_body: _Vec) -> _Vec:

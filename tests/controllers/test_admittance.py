@@ -38,7 +38,8 @@ def test_inner_pd_is_configured_and_runs_at_our_period(model: mujoco.MjModel) ->
 
 def _at_rest_wrench(c: AdmittanceController, state: ControlState, push_world: np.ndarray) -> np.ndarray:
     """The sensor reading for the gripper at rest under its weight and an external push [N]."""
-    f_world = -c.loop.wrist.mass * c.loop.wrist.gravity - push_world  # what external_force() inverts
+    wrist = c.loop.sensor.wrist
+    f_world = -wrist.mass * wrist.gravity - push_world  # what external_force() inverts
     f_site = np.empty(3)
     q = state.quat_world
     mujoco.mju_rotVecQuat(f_site, f_world, np.array([q[0], -q[1], -q[2], -q[3]]))

@@ -65,3 +65,34 @@ def test_the_tare_removes_a_bias_and_moment_about_moves_the_point(model: mujoco.
     offset = np.empty(3)
     mujoco.mju_rotVecQuat(offset, np.array([-0.01, 0.0, 0.0]), state.quat_world)
     np.testing.assert_allclose(moved, np.cross(offset, [0.0, 0.0, 2.0]), atol=1e-12)
+
+
+def test_a_known_acceleration_is_compensated(model: mujoco.MjModel) -> None:
+    """``accel_ref``: the hand's own inertia along an acceleration the caller knows is not contact."""
+    tracker = Tracker(model, make_controller("pd", model, control_dt=0.001))
+    tracker.hold(target(HOME), 0.5)
+    state = tracker.state()
+    sensor = WristSensor(model, centre_body=np.array([0.0, -0.07, -0.01]), dt=0.001)
+    f_rest, _ = sensor.raw(state)
+    accel = np.array([0.5, 0.0, -1.0])
+    f, _ = sensor.raw(state, accel_ref=accel)
+    np.testing.assert_allclose(f - f_rest, sensor.wrist.mass * accel, atol=1e-12)
+    f_update, _ = sensor.update(state, accel_ref=accel)
+    np.testing.assert_allclose(f_update, lowpass_alpha(20.0, 0.001) * f, atol=1e-12)
+
+
+def test_the_fast_moment_is_the_moment_through_the_force_filter(model: mujoco.MjModel) -> None:
+    tracker = Tracker(model, make_controller("pd", model, control_dt=0.001))
+    tracker.hold(target(HOME), 0.5)
+    pushed = tracker.state()
+    pushed = pushed._replace(ft_wrench=pushed.ft_wrench + np.array([0.0, 0.0, 0.0, 0.02, 0.0, 0.0]))
+    centre = np.array([0.0, -0.07, -0.01])
+    fast = WristSensor(model, centre_body=centre, dt=0.001, force_hz=20.0, moment_hz=5.0, fast_moment=True)
+    plain = WristSensor(model, centre_body=centre, dt=0.001, force_hz=20.0, moment_hz=5.0)
+    _, tau = fast.raw(pushed)
+    for sensor in (fast, plain):
+        sensor.update(pushed)
+    np.testing.assert_allclose(fast.moment_fast, lowpass_alpha(20.0, 0.001) * tau, atol=1e-15)
+    np.testing.assert_allclose(fast.moment, lowpass_alpha(5.0, 0.001) * tau, atol=1e-15)
+    np.testing.assert_array_equal(fast.moment, plain.moment)
+    assert np.all(plain.moment_fast == 0.0)
