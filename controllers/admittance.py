@@ -33,11 +33,21 @@ by an accommodation law of their own, with no spring to the reference::
 so the command turns until the contact's moment about the centre is the commanded
 ``target.torque_world`` (zero: a held peg pressed on a flat face turns about its tip until its end
 lies flat). The moment filter (``moment_filter_hz``, slower than the force filter) and the rate
-cap keep the loop clear of the hand's own inertial torques, which the sensor reads too. The turn
+cap keep the loop clear of the hand's own inertial torques, which the sensor reads too. With
+``reversal_backoff`` > 1 an axis turns that many times slower each time its moment reverses
+(:class:`~peg_ctrl.controllers.backoff.ReversalBackoff`): a peg on a face is a relay about its
+tip, and a late reading would otherwise rock it from rim to rim for ever. The turn
 ``psi`` is dropped on an axis as soon as it is no longer moment-controlled: the task re-anchors
 its reference at the present pose. A tare (``tare_time`` > 0: the mean reading over the first
 seconds after reset, which must be free of contact) removes the sensor bias the model does not
 know (the closed jaw, a held peg): a moment loop would integrate it into a drift.
+
+A late sensor (``domain.ft_latency``) destabilises two parts of the law (docs/controllers.md):
+the moment axes' accommodation (the rocking above; ``reversal_backoff`` 2 with
+``moment_filter_hz`` 3.5 settles it) and, with ``rotational``, the rotational spring-damper,
+whose virtual inertia ``rot_inertia`` must exceed the hand's own about the centre of compliance
+(about 0.02 kg m^2 about a held peg's tip): the sensor reads the hand's inertial torque, and
+below it the law amplifies its own motion.
 
 The acceleration term uses the commanded acceleration of the reference (zero for rest-to-rest
 holds); what is left (accelerations, the held peg's 16 g) stays below the deadbands. The
@@ -61,6 +71,7 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.backoff import ReversalBackoff, check_backoff
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.sim.jaw import JawCalibration
@@ -78,7 +89,7 @@ class AdmittanceConfig(ControllerConfig):
     name: ClassVar[str] = "admittance"
     GAINS: ClassVar[tuple[str, ...]] = ("stiffness", "rot_stiffness")
     VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time", "reversal_band")
     mass: float = 2.0  # virtual mass [kg]
     stiffness: float = 300.0  # virtual spring to the reference [N/m]
     damping_ratio: float = 1.0  # D = 2 zeta sqrt(K M), translation and rotation
@@ -95,11 +106,20 @@ class AdmittanceConfig(ControllerConfig):
     moment_damping: float = 0.5  # D_m of moment-controlled axes [N m s/rad]
     max_turn_rate: float = 0.05  # cap on their turn rate [rad/s]
     moment_filter_hz: float = 5.0  # low-pass on the moment they regulate [Hz]
+    # Each time the moment on a moment-controlled axis reverses (crosses from beyond
+    # +reversal_band to beyond -reversal_band [N m], or 3 sigma of its noise), that axis turns
+    # reversal_backoff times slower (controllers/backoff.py); 1: never.
+    reversal_backoff: float = 1.0
+    reversal_band: float = 0.004
     tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
     # [s] 1 kHz: the force regulation on the sensor is rate-sensitive (a held push's median peak
     # force rose from 14 N at 1 kHz to 24 N at 500 Hz and 56 N at 200 Hz; docs/performance.md)
     control_dt: float = 0.001
     inner: PDConfig = PDConfig()  # tracks the shifted target; its control_dt is replaced by ours
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_backoff(self.name, self.reversal_backoff)
 
     def build(self, model: mujoco.MjModel) -> AdmittanceController:
         return AdmittanceController(model, self)
@@ -142,6 +162,7 @@ class AdmittanceLoop:
             tare_time=c.tare_time,
             fast_moment=True,
         )
+        self.backoff = ReversalBackoff(factor=c.reversal_backoff, band=c.reversal_band, size=3)
         self._d = 2.0 * c.damping_ratio * math.sqrt(c.stiffness * c.mass)
         self._d_rot = 2.0 * c.damping_ratio * math.sqrt(c.rot_stiffness * c.rot_inertia)
         self.reset(None)
@@ -157,6 +178,8 @@ class AdmittanceLoop:
         self._setpoint = np.zeros(3)  # command along force-controlled axes [m]
         self._setpoint_rate = np.zeros(3)
         self._prev_v_ref: np.ndarray | None = None
+        self._moment_axes = np.zeros(3, dtype=bool)
+        self.backoff.reset()
         self.sensor.reset(state)
 
     @property
@@ -272,12 +295,14 @@ class AdmittanceLoop:
         """Advance the turn on the moment-controlled axes; (turn or None when there is none, rate)."""
         c = self.config
         axes = target.moment_axes
+        self.backoff.reset(axes & ~self._moment_axes)  # a new regulation starts at full rate
+        self._moment_axes = axes
         if not axes.any():
             self.turn[:] = 0.0
             return None, np.zeros(3)
-        rate = np.clip(
-            (self.moment_filtered + target.torque_world) / c.moment_damping, -c.max_turn_rate, c.max_turn_rate
-        )
+        error = self.moment_filtered + target.torque_world
+        scale = self.backoff.update(error, axes, self.sensor.sigma_moment)
+        rate = np.clip(error / (c.moment_damping * scale), -c.max_turn_rate, c.max_turn_rate)
         rate[~axes] = 0.0
         self.turn[~axes] = 0.0
         self.turn += rate * self.dt

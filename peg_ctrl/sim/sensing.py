@@ -24,11 +24,12 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from peg_ctrl.sim.ft_model import DelayLine
 from peg_ctrl.sim.rotations import cross, rotate, rotate_inv
 from peg_ctrl.sim.scene import FT_SITE, HOME_KEY
 from peg_ctrl.sim.state import ControlState, ft_world
 
-__all__ = ["Detector", "WristModel", "WristSensor", "lowpass_alpha", "within"]
+__all__ = ["Detector", "WristModel", "WristSensor", "WrenchPredictor", "lowpass_alpha", "within"]
 
 _Vec = NDArray[np.float64]
 
@@ -234,6 +235,60 @@ class WristSensor:
         """The filtered moment moved to another point of the gripper frame [N m], world."""
         q = state.quat_world
         return self.moment + cross(rotate(q, self.centre_body) - rotate(q, point_body), self.force)
+
+
+class WrenchPredictor:
+    """The contact wrench *now*, from a filtered reading ``latency`` [s] old: a Smith predictor
+    on a linear contact model.
+
+    A controller that moves its command ``s`` along an axis against a contact of stiffness ``K``
+    changes the contact wrench on the hand by ``-K ds``. The sensor reports that change
+    ``latency`` late, and the estimate's first-order filter later still. The predictor corrects
+    the filtered reading for the command's own motion that the reading cannot show yet::
+
+        w_now = w_read - K (s_now - s_seen)
+
+    ``s_seen`` is the command as the reading reflects it: ``s`` delayed by ``latency`` (a
+    :class:`~peg_ctrl.sim.ft_model.DelayLine`, the sensor's own rule) and passed through the
+    reading's filter (gain ``alpha`` per axis, :func:`lowpass_alpha`), so the filter's lag is
+    predicted too. Where the model is right (``K`` the contact's stiffness) the loop no longer
+    sees the delay nor the filter; where the contact is softer than ``K`` (free space, a peg
+    turning on one point of its rim) the correction acts as extra damping, about ``K`` times
+    the latency and the filter's time constant, on an accommodation law.
+
+    Call :meth:`predict` once per reading, with the command in effect since the last one.
+    """
+
+    def __init__(
+        self, *, stiffness: NDArray[np.float64], latency: float, dt: float, alpha: NDArray[np.float64]
+    ) -> None:
+        self.stiffness = np.asarray(stiffness, dtype=float)
+        self.alpha = np.asarray(alpha, dtype=float)
+        if self.alpha.shape != self.stiffness.shape:
+            raise ValueError(f"alpha {self.alpha.shape} and stiffness {self.stiffness.shape} differ in shape")
+        self.latency = latency
+        self._line = DelayLine(latency=latency, dt=dt, width=self.stiffness.size)
+        self.reset(np.zeros(self.stiffness.size))
+
+    def reset(self, command: _Vec) -> None:
+        """Forget the history: the command has been ``command`` (n,) for ever."""
+        self._line.reset(command)
+        self.seen = np.array(command, dtype=float)  # s_seen (n,)
+        self.correction = np.zeros(self.stiffness.size)  # the last -K (s_now - s_seen) (n,)
+
+    def restart(self, where: NDArray[np.bool_], command: _Vec) -> None:
+        """Forget the history on the axes ``where`` (n,): an axis whose command starts afresh (it
+        has just become wrench-controlled) has moved in no way the reading could miss."""
+        if where.any():
+            self._line.reset(command, where)
+            self.seen[where] = command[where]
+
+    def predict(self, reading: _Vec, command: _Vec) -> _Vec:
+        """The wrench now (n,) from the filtered ``reading`` (n,) [N, N m] and the ``command``
+        (n,) in effect [m, rad]."""
+        self.seen += self.alpha * (self._line.push(command) - self.seen)
+        self.correction = -self.stiffness * (command - self.seen)
+        return reading + self.correction
 
 
 class Detector:
