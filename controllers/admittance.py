@@ -16,7 +16,8 @@ about the tip::
     commanded pose: turned by phi about the centre of the reference, then shifted by x;
     tracked by the ``pd`` controller.
 
-(:mod:`peg_ctrl.sim.sensing` computes ``F_ext`` and ``tau_ext``.) Force-controlled axes
+(:class:`peg_ctrl.sim.sensing.WristSensor` estimates ``F_ext`` and ``tau_ext``: the tare and
+the filters below are its.) Force-controlled axes
 (``target.force_axes``: flagged in ``target.wrench_axes`` or a non-zero ``target.force_world``
 entry) are regulated in closed loop with the sensor (an accommodation law): the command along the
 axis starts at the measured position when the axis becomes force-controlled and moves as
@@ -32,11 +33,21 @@ by an accommodation law of their own, with no spring to the reference::
 so the command turns until the contact's moment about the centre is the commanded
 ``target.torque_world`` (zero: a held peg pressed on a flat face turns about its tip until its end
 lies flat). The moment filter (``moment_filter_hz``, slower than the force filter) and the rate
-cap keep the loop clear of the hand's own inertial torques, which the sensor reads too. The turn
+cap keep the loop clear of the hand's own inertial torques, which the sensor reads too. With
+``reversal_backoff`` > 1 an axis turns that many times slower each time its moment reverses
+(:class:`~peg_ctrl.controllers.backoff.ReversalBackoff`): a peg on a face is a relay about its
+tip, and a late reading would otherwise rock it from rim to rim for ever. The turn
 ``psi`` is dropped on an axis as soon as it is no longer moment-controlled: the task re-anchors
 its reference at the present pose. A tare (``tare_time`` > 0: the mean reading over the first
 seconds after reset, which must be free of contact) removes the sensor bias the model does not
 know (the closed jaw, a held peg): a moment loop would integrate it into a drift.
+
+A late sensor (``domain.ft_latency``) destabilises two parts of the law (docs/controllers.md):
+the moment axes' accommodation (the rocking above; ``reversal_backoff`` 2 with
+``moment_filter_hz`` 3.5 settles it) and, with ``rotational``, the rotational spring-damper,
+whose virtual inertia ``rot_inertia`` must exceed the hand's own about the centre of compliance
+(about 0.02 kg m^2 about a held peg's tip): the sensor reads the hand's inertial torque, and
+below it the law amplifies its own motion.
 
 The acceleration term uses the commanded acceleration of the reference (zero for rest-to-rest
 holds); what is left (accelerations, the held peg's 16 g) stays below the deadbands. The
@@ -60,11 +71,12 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.backoff import ReversalBackoff, check_backoff
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.sim.jaw import JawCalibration
-from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.sim.sensing import WristModel, lowpass_alpha
+from peg_ctrl.sim.rotations import cross, quat_mul, rotate
+from peg_ctrl.sim.sensing import WristSensor
 from peg_ctrl.sim.state import ControlState
 
 __all__ = ["AdmittanceConfig", "AdmittanceController", "AdmittanceLoop"]
@@ -77,7 +89,7 @@ class AdmittanceConfig(ControllerConfig):
     name: ClassVar[str] = "admittance"
     GAINS: ClassVar[tuple[str, ...]] = ("stiffness", "rot_stiffness")
     VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time", "reversal_band")
     mass: float = 2.0  # virtual mass [kg]
     stiffness: float = 300.0  # virtual spring to the reference [N/m]
     damping_ratio: float = 1.0  # D = 2 zeta sqrt(K M), translation and rotation
@@ -94,11 +106,20 @@ class AdmittanceConfig(ControllerConfig):
     moment_damping: float = 0.5  # D_m of moment-controlled axes [N m s/rad]
     max_turn_rate: float = 0.05  # cap on their turn rate [rad/s]
     moment_filter_hz: float = 5.0  # low-pass on the moment they regulate [Hz]
+    # Each time the moment on a moment-controlled axis reverses (crosses from beyond
+    # +reversal_band to beyond -reversal_band [N m], or 3 sigma of its noise), that axis turns
+    # reversal_backoff times slower (controllers/backoff.py); 1: never.
+    reversal_backoff: float = 1.0
+    reversal_band: float = 0.004
     tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
     # [s] 1 kHz: the force regulation on the sensor is rate-sensitive (a held push's median peak
     # force rose from 14 N at 1 kHz to 24 N at 500 Hz and 56 N at 200 Hz; docs/performance.md)
     control_dt: float = 0.001
     inner: PDConfig = PDConfig()  # tracks the shifted target; its control_dt is replaced by ours
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_backoff(self.name, self.reversal_backoff)
 
     def build(self, model: mujoco.MjModel) -> AdmittanceController:
         return AdmittanceController(model, self)
@@ -114,13 +135,12 @@ class AdmittanceLoop:
     target an inner controller tracks. See the module docstring.
 
     Attributes:
+        sensor: The estimator of the contact wrench (tare, filters: ``filter_hz`` on the force
+            and, as its fast moment, the torque; ``moment_filter_hz`` on its moment).
         offset: (3,) Current yield of the command, world frame [m].
         offset_rate: (3,) Its rate [m/s].
         rotation: (3,) Current turn of the command about the centre of compliance, world [rad].
         turn: (3,) Turn on the moment-controlled axes, world [rad].
-        force_filtered: (3,) Low-passed external force, world frame [N].
-        torque_filtered: (3,) Low-passed external torque about the centre, world frame [N m].
-        moment_filtered: (3,) The same torque through the slower moment filter [N m].
     """
 
     def __init__(
@@ -132,12 +152,19 @@ class AdmittanceLoop:
         # own PD) or, bumpless, at the target's (an inner loop with a velocity feed-forward, like
         # the IK, would otherwise turn the step of its static error into a velocity kick).
         self.bumpless = bumpless
-        self.wrist = WristModel(model)
         self._centre_body = np.asarray(c.compliance_center, dtype=float)
+        self.sensor = WristSensor(
+            model,
+            centre_body=self._centre_body,
+            dt=control_dt,
+            force_hz=c.filter_hz,
+            moment_hz=c.moment_filter_hz,
+            tare_time=c.tare_time,
+            fast_moment=True,
+        )
+        self.backoff = ReversalBackoff(factor=c.reversal_backoff, band=c.reversal_band, size=3)
         self._d = 2.0 * c.damping_ratio * math.sqrt(c.stiffness * c.mass)
         self._d_rot = 2.0 * c.damping_ratio * math.sqrt(c.rot_stiffness * c.rot_inertia)
-        self._alpha = lowpass_alpha(c.filter_hz, control_dt)
-        self._alpha_m = lowpass_alpha(c.moment_filter_hz, control_dt)
         self.reset(None)
 
     def reset(self, state: ControlState | None) -> None:
@@ -147,41 +174,42 @@ class AdmittanceLoop:
         self.rotation = np.zeros(3)
         self.rotation_rate = np.zeros(3)
         self.turn = np.zeros(3)
-        self.force_filtered = np.zeros(3)
-        self.torque_filtered = np.zeros(3)
-        self.moment_filtered = np.zeros(3)
         self._force_axes = np.zeros(3, dtype=bool)
         self._setpoint = np.zeros(3)  # command along force-controlled axes [m]
         self._setpoint_rate = np.zeros(3)
         self._prev_v_ref: np.ndarray | None = None
-        self._t0 = state.t if state is not None else 0.0
-        self._tares = 0
-        self._force_bias = np.zeros(3)
-        self._torque_bias_body = np.zeros(3)
+        self._moment_axes = np.zeros(3, dtype=bool)
+        self.backoff.reset()
+        self.sensor.reset(state)
+
+    @property
+    def force_filtered(self) -> np.ndarray:
+        """(3,) Low-passed external force, world frame [N]."""
+        return self.sensor.force
+
+    @property
+    def torque_filtered(self) -> np.ndarray:
+        """(3,) Low-passed external torque about the centre, world frame [N m] (``filter_hz``)."""
+        return self.sensor.moment_fast
+
+    @property
+    def moment_filtered(self) -> np.ndarray:
+        """(3,) The same torque through the slower moment filter (``moment_filter_hz``) [N m]."""
+        return self.sensor.moment
 
     def external_wrench(self, state: ControlState, accel_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and its torque about the centre of compliance [N m], world frame
         (unfiltered; tared once a tare was taken)."""
-        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
-        if self._tares:
-            f_ext = f_ext - self._force_bias
-            tau = tau - rotate(state.quat_world, self._torque_bias_body)
-        return f_ext, tau
-
-    def _tare(self, state: ControlState, accel_ref: np.ndarray) -> None:
-        f_ext, tau = self.wrist.contact_wrench(state, self._centre_body, accel_ref)
-        self._tares += 1
-        self._force_bias += (f_ext - self._force_bias) / self._tares
-        self._torque_bias_body += (rotate_inv(state.quat_world, tau) - self._torque_bias_body) / self._tares
+        return self.sensor.raw(state, accel_ref=accel_ref)
 
     def shape(self, state: ControlState, target: GripperTarget) -> GripperTarget:
         """The target shifted by the admittance, for the inner controller."""
         c = self.config
         v_ref = np.asarray(target.v_world)
-        tau_ext = self._sense(state, v_ref)
+        self._sense(state, v_ref)
         self._translate(state, target)
         angle = self._rotate_compliantly() if c.rotational else 0.0
-        total, turn_rate = self._turn(tau_ext, target)
+        total, turn_rate = self._turn(target)
         if total is not None:
             total = total + self.rotation if c.rotational else total
             angle = float(np.linalg.norm(total))
@@ -190,17 +218,12 @@ class AdmittanceLoop:
             total, rate = self.rotation, self.rotation_rate
         return self._command(target, v_ref, total, rate, angle)
 
-    def _sense(self, state: ControlState, v_ref: np.ndarray) -> np.ndarray:
-        """Tare (in the first ``tare_time``), filter the contact wrench; the unfiltered torque."""
+    def _sense(self, state: ControlState, v_ref: np.ndarray) -> None:
+        """Tare (in the first ``tare_time``), filter the contact wrench, compensating the
+        reference's acceleration."""
         accel_ref = np.zeros(3) if self._prev_v_ref is None else (v_ref - self._prev_v_ref) / self.dt
         self._prev_v_ref = v_ref.copy()
-        if state.t - self._t0 < self.config.tare_time:
-            self._tare(state, accel_ref)
-        f_ext, tau_ext = self.external_wrench(state, accel_ref)
-        a = self._alpha
-        self.force_filtered += a * (f_ext - self.force_filtered)
-        self.torque_filtered += a * (tau_ext - self.torque_filtered)
-        return tau_ext
+        self.sensor.update(state, accel_ref=accel_ref)
 
     def _translate(self, state: ControlState, target: GripperTarget) -> None:
         """Translation: a spring-damper to the reference, except along force-controlled axes,
@@ -268,17 +291,18 @@ class AdmittanceLoop:
             v_cmd = np.where(axes, self._setpoint_rate, v_cmd)
         return GripperTarget.trusted(p_cmd, q_cmd, v_cmd, omega, target.jaw_sep_m)
 
-    def _turn(self, tau_ext: np.ndarray, target: GripperTarget) -> tuple[np.ndarray | None, np.ndarray]:
+    def _turn(self, target: GripperTarget) -> tuple[np.ndarray | None, np.ndarray]:
         """Advance the turn on the moment-controlled axes; (turn or None when there is none, rate)."""
         c = self.config
         axes = target.moment_axes
-        self.moment_filtered += self._alpha_m * (tau_ext - self.moment_filtered)
+        self.backoff.reset(axes & ~self._moment_axes)  # a new regulation starts at full rate
+        self._moment_axes = axes
         if not axes.any():
             self.turn[:] = 0.0
             return None, np.zeros(3)
-        rate = np.clip(
-            (self.moment_filtered + target.torque_world) / c.moment_damping, -c.max_turn_rate, c.max_turn_rate
-        )
+        error = self.moment_filtered + target.torque_world
+        scale = self.backoff.update(error, axes, self.sensor.sigma_moment)
+        rate = np.clip(error / (c.moment_damping * scale), -c.max_turn_rate, c.max_turn_rate)
         rate[~axes] = 0.0
         self.turn[~axes] = 0.0
         self.turn += rate * self.dt

@@ -30,6 +30,35 @@ again from the new reading. Moment axes turn the command about ``c``: the QP's m
 rotation about the peg's tip, so a moment there turns the peg about its tip, as a remote
 centre of compliance does.
 
+**A late sensor** (``sensor_latency`` > 0, the latency ``L`` the F/T reading is assumed to
+have): re-anchoring on a reading ``L`` old (and filtered, later still) would plan from a wrench
+that the command's own motion since has already changed. A Smith predictor on the same contact
+model (:class:`~peg_ctrl.sim.sensing.WrenchPredictor`) corrects it first::
+
+    w_0 = w_read - K (s_now - s_seen)      s_seen: the command delayed by L and passed through
+                                           the reading's own filter (force_filter_hz,
+                                           moment_filter_hz), so the filter's lag is predicted too
+
+An axis that has just become wrench-controlled starts with no correction. ``sensor_latency``
+0 (the default) leaves ``w_0`` the filtered reading, bit for bit. The prediction is only as
+good as ``K``: along the force axes the inner loop's stiffness is close to the contact's
+(4447 against the 2500-3600 N/m measured on a flat peg); about the moment axes
+``contact_rot_stiffness`` (2 N m/rad) is a peg on its rim, while a peg lying flat is some
+50-150 N m/rad stiff, so on the moment axes the predictor changes little. Measured on the
+``align`` press (docs/controllers.md): it neither causes nor cures the limit cycle there
+(including the filter's lag or not); the reversal backoff below does.
+
+**Reversal backoff** (``reversal_backoff`` > 1): about a moment axis a peg pressed on a face is a
+relay — the moment about its tip is the normal force times the lever to the rim it stands on,
+the same until its end lies flat and the opposite once it has turned past — and a relay with a
+delay (the latency, the moment filter's lag) always limit-cycles: the command overshoots flat
+by about ``rate x delay`` and rocks the peg from rim to rim. Each time the moment error on a
+moment axis reverses (beyond ``reversal_band``, or 3 sigma of the moment's noise), that axis's
+``D`` is multiplied and its ``v_min`` divided by ``reversal_backoff``
+(:class:`~peg_ctrl.controllers.backoff.ReversalBackoff`), so the rocking dies out geometrically
+whatever the delay; an axis that never reverses (the peg turning on its rim towards flat)
+keeps its full rate. The backoff restarts when the axis becomes moment-controlled again.
+
 The per-axis problems are independent (a diagonal model); the active ones are stacked into one
 QP and solved by DAQP, a dense active-set solver, called directly (``contact_solver: daqp``, the
 fastest measured on this QP: docs/controllers.md), or by any other solver through
@@ -50,8 +79,9 @@ import scipy.sparse
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.backoff import ReversalBackoff
 from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
-from peg_ctrl.sim.sensing import WristSensor
+from peg_ctrl.sim.sensing import WrenchPredictor, WristSensor, lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 
 __all__ = ["ContactQP", "ContactQPSolution", "ContactLoop", "ContactSettings"]
@@ -76,6 +106,9 @@ class ContactSettings:
     tare_time: float  # sensor tare over the first seconds after reset [s]
     force_filter_hz: float
     moment_filter_hz: float
+    latency: float = 0.0  # the sensor's latency the wrench is predicted across [s]; 0: none
+    reversal_backoff: float = 1.0  # a moment axis's damping grows by this at each reversal; 1: never
+    reversal_band: float = 0.004  # a reversal crosses from beyond +band to beyond -band [N m]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,9 +151,12 @@ class ContactQP:
             hess, g, constraints, np.concatenate([rate, rate]), lb=lo, ub=hi, solver=self.s.solver
         )
 
-    def problem(self, axes: NDArray[np.bool_], measured: _Vec, wanted: _Vec) -> tuple[_Vec, _Vec, _Vec, _Vec]:
+    def problem(
+        self, axes: NDArray[np.bool_], measured: _Vec, wanted: _Vec, backoff: _Vec | None = None
+    ) -> tuple[_Vec, _Vec, _Vec, _Vec]:
         """The QP's data for the active ``axes``: linear term, bounds on y (lo, hi) and the
-        rate bound on its increments (the module docstring's problem)."""
+        rate bound on its increments (the module docstring's problem); ``backoff`` (6,)
+        multiplies each axis's damping and divides its minimum rate (None: 1)."""
         s = self.s
         n = s.horizon
         idx = np.flatnonzero(axes)
@@ -128,7 +164,8 @@ class ContactQP:
         for i in idx:
             k = s.stiffness[i]
             error = float(measured[i] - wanted[i])  # y that would bring the wrench to wanted
-            v = min(s.rate_cap[i], max(s.rate_min[i], abs(error) / s.damping[i]))
+            slow = 1.0 if backoff is None else float(backoff[i])  # damping up, minimum rate down
+            v = min(s.rate_cap[i], max(s.rate_min[i] / slow, abs(error) / (s.damping[i] * slow)))
             step = k * v * s.dt  # largest |dy| per step [N]
             lin.append(np.full(n, -2.0 * error))
             cap.append(np.full(n, step))
@@ -141,9 +178,11 @@ class ContactQP:
                 hi.append(np.full(n, np.inf))
         return np.concatenate(lin), np.concatenate(lo), np.concatenate(hi), np.concatenate(cap)
 
-    def solve(self, axes: NDArray[np.bool_], measured: _Vec, wanted: _Vec) -> ContactQPSolution:
+    def solve(
+        self, axes: NDArray[np.bool_], measured: _Vec, wanted: _Vec, backoff: _Vec | None = None
+    ) -> ContactQPSolution:
         """Plan the active ``axes`` (6,) from the measured wrench ``measured`` (6,) towards
-        ``wanted`` (6,) (both on the hand [N, N m])."""
+        ``wanted`` (6,) (both on the hand [N, N m]); ``backoff`` as for :meth:`problem`."""
         s = self.s
         n = s.horizon
         idx = np.flatnonzero(axes)
@@ -151,7 +190,7 @@ class ContactQP:
         if idx.size == 0:
             return ContactQPSolution(rate, np.zeros((0, n)), "idle")
         hess, rows = self._matrices(idx.size)
-        lin, lo, hi, cap = self.problem(axes, measured, wanted)
+        lin, lo, hi, cap = self.problem(axes, measured, wanted, backoff)
         y = self._qp(hess, lin, rows, cap, lo, hi)
         status = "ok"
         if y is None:  # infeasible or failed: take the rate-limited step towards the wrench
@@ -189,6 +228,17 @@ class ContactLoop:
             moment_hz=settings.moment_filter_hz,
             tare_time=settings.tare_time,
         )
+        self.backoff = ReversalBackoff(factor=settings.reversal_backoff, band=settings.reversal_band, size=6)
+        self.predictor: WrenchPredictor | None = None
+        if settings.latency > 0:
+            alpha = [lowpass_alpha(settings.force_filter_hz, control_dt)] * 3
+            alpha += [lowpass_alpha(settings.moment_filter_hz, control_dt)] * 3
+            self.predictor = WrenchPredictor(
+                stiffness=np.asarray(settings.stiffness),
+                latency=settings.latency,
+                dt=control_dt,
+                alpha=np.array(alpha),
+            )
         self.reset(None)
 
     def reset(self, state: ControlState | None) -> None:
@@ -197,8 +247,12 @@ class ContactLoop:
         self.tip = np.zeros(3)  # commanded tip position along the force axes [m]
         self.turn = np.zeros(3)  # commanded turn about the tip on the moment axes [rad]
         self.rate = np.zeros(6)
+        self.wrench = np.zeros(6)  # the wrench the QP plans from: sensed, or predicted [N, N m]
+        self.backoff.reset()
         self.last: ContactQPSolution | None = None
         self.solve_times: list[float] = []  # wall time of every QP solve [s]
+        if self.predictor is not None:
+            self.predictor.reset(np.zeros(6))
 
     def shape(self, state: ControlState, target: GripperTarget, *, solve: bool) -> GripperTarget:
         """The pose for the inner loop (see the class docstring)."""
@@ -206,18 +260,28 @@ class ContactLoop:
         axes = np.concatenate([target.force_axes, target.moment_axes]) if target.force_controlled else _NONE
         q_t = np.asarray(target.quat_world)
         tip_t = np.asarray(target.p_world) + rotate(q_t, self.centre_body)
+        restart = axes & ~self.axes
+        self.backoff.reset(restart)
         entering = axes[:3] & ~self.axes[:3]
         self.tip[entering] = tip_t[entering]
         self.turn[~axes[3:]] = 0.0
         self.rate[~axes] = 0.0
+        self.wrench = np.concatenate([force, moment])
+        if self.predictor is not None:
+            command = np.concatenate([self.tip, self.turn])  # in effect since the last reading
+            self.predictor.restart(~self.axes | ~axes, command)
+            self.wrench = self.predictor.predict(self.wrench, command)
         self.axes = axes
         if not axes.any():
             self.last = None
             return target
         if solve:
             wanted = -np.concatenate([target.force_world, target.torque_world])
+            sigma = np.concatenate([np.zeros(3), self.sensor.sigma_moment])
+            # Only the moment axes back off: a force axis is a spring, not a relay.
+            scale = self.backoff.update(self.wrench - wanted, axes & _MOMENT_AXES, sigma)
             t0 = time.perf_counter()
-            self.last = self.qp.solve(axes, np.concatenate([force, moment]), wanted)
+            self.last = self.qp.solve(axes, self.wrench, wanted, scale)
             self.solve_times.append(time.perf_counter() - t0)
             self.rate = self.last.rate
         self.tip += self.rate[:3] * self.dt
@@ -240,3 +304,5 @@ class ContactLoop:
 
 _NONE = np.zeros(6, dtype=bool)
 _NONE.setflags(write=False)
+_MOMENT_AXES = np.array([False] * 3 + [True] * 3)
+_MOMENT_AXES.setflags(write=False)

@@ -38,6 +38,8 @@ force/torque sensor's reading — force tracking along the force axes with the c
 (``compliance_center``, the held peg's tip) turning the command about the tip — and the effort
 QP above tracks the pose it plans. Its contact model's stiffness along the force axes is the
 effort QP's own position stiffness (the LQR gain), unless ``contact_stiffness`` says otherwise.
+A late F/T reading (``sensor_latency``) and the reversal backoff of the moment axes
+(``reversal_backoff``, ``reversal_band``) are described there too.
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
+from peg_ctrl.controllers.backoff import check_backoff
 from peg_ctrl.controllers.base import (
     ControllerBase,
     ControllerConfig,
@@ -89,7 +92,12 @@ class MPCConfig(ControllerConfig):
     name: ClassVar[str] = "mpc"
     GAINS: ClassVar[tuple[str, ...]] = ("q_pos", "q_rot")
     VECTORS: ClassVar[tuple[str, ...]] = ("compliance_center",)
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("tare_time", "contact_smoothing")
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = (
+        "tare_time",
+        "contact_smoothing",
+        "sensor_latency",
+        "reversal_band",
+    )
     horizon: int = 15  # steps
     control_dt: float = 0.005  # [s] 200 Hz: outcomes as at 1 kHz (docs/performance.md)
     mpc_dt: float = 0.01  # [s], a whole multiple of control_dt
@@ -121,6 +129,14 @@ class MPCConfig(ControllerConfig):
     tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
     force_filter_hz: float = 20.0  # low-pass on the sensed force [Hz]
     moment_filter_hz: float = 5.0  # low-pass on the sensed moment [Hz]
+    # The F/T reading's latency [s] that the contact QP predicts the wrench across (a Smith
+    # predictor on its contact model, peg_ctrl.controllers.contact_mpc); 0: the reading as it is.
+    sensor_latency: float = 0.0
+    # Each time the moment on a moment axis reverses (crosses from beyond +reversal_band to
+    # beyond -reversal_band [N m], or 3 sigma of its noise), that axis's accommodation slows by
+    # reversal_backoff (its damping up, its minimum rate down); 1: never.
+    reversal_backoff: float = 1.0
+    reversal_band: float = 0.004
 
     def __post_init__(self) -> None:
         for field in ("horizon", "contact_horizon"):
@@ -145,6 +161,7 @@ class MPCConfig(ControllerConfig):
                 f"{self.contact_solver!r} is not installed; available: "
                 f"{', '.join(sorted(qpsolvers.available_solvers))}",
             )
+        check_backoff(self.name, self.reversal_backoff)
         check_multiple(self, "mpc_dt")
         if self.contact_dt is not None:
             check_multiple(self, "contact_dt")
@@ -330,6 +347,9 @@ class MPCController(ControllerBase[MPCConfig]):
             tare_time=c.tare_time,
             force_filter_hz=c.force_filter_hz,
             moment_filter_hz=c.moment_filter_hz,
+            latency=c.sensor_latency,
+            reversal_backoff=c.reversal_backoff,
+            reversal_band=c.reversal_band,
         )
         return ContactLoop(model, settings, control_dt=c.control_dt)
 

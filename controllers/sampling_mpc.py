@@ -287,17 +287,13 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
             )
             self._inner = ImpedanceController(self._model, inner_cfg, jaw_calibration=self._jaw)
             self._inner.reset(state)
-            sensor = WristSensor(self._model, centre_body=tip, dt=c.control_dt, tare_time=c.tare_time)
             if self._sensor is None:
-                sensor.reset(state)  # the timed tare starts now
-            else:  # keep the tare taken so far, its moment moved to the new centre
-                old = self._sensor
-                sensor.force_bias = old.force_bias.copy()
-                f_body = rotate_inv(state.quat_world, old.force_bias)
-                sensor.moment_bias_body = old.moment_bias_body + cross(old.centre_body - tip, f_body)
-                sensor._n = old._n  # noqa: SLF001 - the same class's state
-                sensor._t0 = old._t0  # noqa: SLF001
-            self._sensor = sensor
+                self._sensor = WristSensor(
+                    self._model, centre_body=tip, dt=c.control_dt, tare_time=c.tare_time
+                )
+                self._sensor.reset(state)  # the timed tare starts now
+            else:  # keep the tare taken so far and the filters, moments moved to the new centre
+                self._sensor.move_centre(tip, state)
         inner = self._inner
         k = np.array([*inner.config.k_pos, *inner.config.k_rot])
         d = inner._d  # noqa: SLF001 - the impedance's damping, which the model must reproduce

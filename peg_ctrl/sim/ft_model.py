@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from peg_ctrl.errors import ConfigError, UnknownComponent
 
-__all__ = ["FTSensorModel", "FTSensorStream", "FT_PRESETS", "ft_preset"]
+__all__ = ["DelayLine", "FTSensorModel", "FTSensorStream", "FT_PRESETS", "ft_preset"]
 
 _Wrench = NDArray[np.float64]
 
@@ -99,32 +99,76 @@ def ft_preset(name: str, *, where: str = "") -> FTSensorModel:
         raise UnknownComponent("F/T sensor preset", name, FT_PRESETS, where=where) from None
 
 
-class FTSensorStream:
-    """One episode's F/T readings through ``model``, one per period ``dt`` [s], from ``rng``.
+class DelayLine:
+    """A sampled signal ``latency`` [s] late: one sample of ``width`` channels per period ``dt``
+    [s], in a preallocated ring of the last samples.
 
-    Call :meth:`reset` with the first true wrench, then :meth:`apply` once per reading. The
-    delay line is a preallocated ring of the last readings; an ideal model returns its input
-    untouched and draws nothing.
+    A latency that is a whole number of periods returns the sample that many periods back; in
+    between, the two samples around it are interpolated linearly. Until :meth:`push` has been
+    called that often, the samples before it are the one :meth:`reset` gave. The sensor's
+    readings (:class:`FTSensorStream`) and a controller's prediction of them
+    (:class:`peg_ctrl.sim.sensing.WrenchPredictor`) are delayed by the same rule.
     """
 
-    def __init__(self, model: FTSensorModel, *, dt: float, rng: np.random.Generator) -> None:
+    def __init__(self, *, latency: float, dt: float, width: int) -> None:
         if not (math.isfinite(dt) and dt > 0):
             raise ConfigError(f"dt must be finite and > 0 s, got {dt!r}")
-        self.model = model
-        self.dt = dt
-        self.rng = rng
-        self._ideal = not model.noisy
-        periods = model.latency / dt
+        if not (math.isfinite(latency) and latency >= 0):
+            raise ConfigError(f"latency must be finite and >= 0 s, got {latency!r}")
+        periods = latency / dt
         whole = round(periods)
         if abs(periods - whole) <= _WHOLE_PERIODS_TOL * max(1.0, periods):
             self._lag, self._frac = int(whole), 0.0
         else:
             self._lag, self._frac = math.floor(periods), periods - math.floor(periods)
-        # The readings back to lag (and lag + 1 to interpolate); none needed without latency.
+        # The samples back to lag (and lag + 1 to interpolate); none needed without latency.
         size = self._lag + (2 if self._frac > 0 else 1)
-        self._ring = np.zeros((size, 6)) if size > 1 else None
-        self._head = 0  # row of the newest reading
-        self._scratch = np.zeros(6)
+        self._ring = np.zeros((size, width)) if size > 1 else None
+        self._head = 0  # row of the newest sample
+        self._scratch = np.zeros(width)
+
+    def reset(self, first: NDArray[np.float64], where: NDArray[np.bool_] | None = None) -> None:
+        """Fill the line with ``first`` (width,): every sample before the next :meth:`push` was
+        ``first``; with ``where`` (width,), on those channels only."""
+        if self._ring is None:
+            return
+        if where is None:
+            self._ring[:] = first
+            self._head = 0
+        else:
+            self._ring[:, where] = np.asarray(first)[where]
+
+    def push(self, sample: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Add this period's ``sample`` (width,); the signal ``latency`` ago (a new array)."""
+        ring = self._ring
+        if ring is None:
+            return np.array(sample, dtype=np.float64)
+        n = len(ring)
+        head = self._head = (self._head + 1) % n
+        ring[head] = sample
+        out = ring[(head - self._lag) % n].copy()
+        if self._frac > 0:
+            # (1 - f) * sample(lag periods ago) + f * sample(lag + 1 periods ago)
+            out *= 1.0 - self._frac
+            np.multiply(ring[(head - self._lag - 1) % n], self._frac, out=self._scratch)
+            out += self._scratch
+        return out
+
+
+class FTSensorStream:
+    """One episode's F/T readings through ``model``, one per period ``dt`` [s], from ``rng``.
+
+    Call :meth:`reset` with the first true wrench, then :meth:`apply` once per reading. The
+    delay line is a :class:`DelayLine`; an ideal model returns its input untouched and draws
+    nothing.
+    """
+
+    def __init__(self, model: FTSensorModel, *, dt: float, rng: np.random.Generator) -> None:
+        self._delay = DelayLine(latency=model.latency, dt=dt, width=6)  # checks dt
+        self.model = model
+        self.dt = dt
+        self.rng = rng
+        self._ideal = not model.noisy
         self._bias = np.zeros(3)  # on the force channels [N]
         # One draw per reading: the bias's step (if it drifts), then the white noise of the
         # channels that have any (forces 0-2, torques 3-5), each scaled by its sigma.
@@ -145,9 +189,7 @@ class FTSensorStream:
     def reset(self, first_reading: _Wrench) -> None:
         """Start an episode: the delay line holds ``first_reading`` (6,) (the true wrench at the
         start), the bias is zero."""
-        if self._ring is not None:
-            self._ring[:] = first_reading
-        self._head = 0
+        self._delay.reset(first_reading)
         self._bias[:] = 0.0
 
     def apply(self, true_wrench: _Wrench) -> _Wrench:
@@ -155,19 +197,7 @@ class FTSensorStream:
         (``true_wrench`` itself for an ideal model)."""
         if self._ideal:
             return true_wrench
-        ring = self._ring
-        if ring is None:
-            out = np.array(true_wrench, dtype=np.float64)
-        else:
-            n = len(ring)
-            head = self._head = (self._head + 1) % n
-            ring[head] = true_wrench
-            out = ring[(head - self._lag) % n].copy()
-            if self._frac > 0:
-                # (1 - f) * reading(lag periods ago) + f * reading(lag + 1 periods ago)
-                out *= 1.0 - self._frac
-                np.multiply(ring[(head - self._lag - 1) % n], self._frac, out=self._scratch)
-                out += self._scratch
+        out = self._delay.push(true_wrench)
         if self._z.size:
             self.rng.standard_normal(out=self._z)
             self._z *= self._scale

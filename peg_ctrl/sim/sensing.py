@@ -24,11 +24,12 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from peg_ctrl.sim.ft_model import DelayLine
 from peg_ctrl.sim.rotations import cross, rotate, rotate_inv
 from peg_ctrl.sim.scene import FT_SITE, HOME_KEY
 from peg_ctrl.sim.state import ControlState, ft_world
 
-__all__ = ["Detector", "WristModel", "WristSensor", "lowpass_alpha", "within"]
+__all__ = ["Detector", "WristModel", "WristSensor", "WrenchPredictor", "lowpass_alpha", "within"]
 
 _Vec = NDArray[np.float64]
 
@@ -91,11 +92,15 @@ class WristSensor:
       and inertia the model leaves over, and the reading of a noise-free sensor, are not zero).
     - **Acceleration.** The hand's inertia is compensated along its measured acceleration (the
       finite difference of the sensed velocity, low-passed at ``accel_hz``), so a hop or a stop
-      does not read as a touch.
+      does not read as a touch; or along an acceleration the caller knows (``accel_ref``, e.g. the
+      reference's: :meth:`update`, :meth:`raw` and :meth:`accumulate_tare` take it).
 
     Attributes:
         force: (3,) filtered contact force on the hand, world frame [N].
         moment: (3,) filtered moment of the contact about the point, world frame [N m].
+        moment_fast: (3,) the same moment through the force's filter (``force_hz``), with
+            ``fast_moment`` (a loop that needs a quicker moment than ``moment_hz`` gives); zero
+            otherwise.
         force_bias: (3,) the force bias, world frame [N]; moment_bias_body (3,) the moment's,
             gripper frame [N m].
         noise_force: (3,) standard deviation of one force reading, world axes [N] (0 before a tare).
@@ -114,6 +119,7 @@ class WristSensor:
         accel_hz: float = 0.0,
         bias_time: float = 1.0,
         resolution: tuple[float, float] = (0.05, 5e-4),
+        fast_moment: bool = False,
     ) -> None:
         self.wrist = WristModel(model)
         self.centre_body = np.asarray(centre_body, dtype=float)
@@ -127,6 +133,7 @@ class WristSensor:
         self._gain_force = self._a_force / (2.0 - self._a_force)
         self._gain_moment = self._a_moment / (2.0 - self._a_moment)
         self.resolution = resolution
+        self.fast_moment = fast_moment
         self._zero = np.zeros(3)
         self.reset(None)
 
@@ -142,6 +149,7 @@ class WristSensor:
         self.noise_moment = np.zeros(3)
         self.force = np.zeros(3)
         self.moment = np.zeros(3)
+        self.moment_fast = np.zeros(3)
         self.accel = np.zeros(3)
         self._v_prev: _Vec | None = None
 
@@ -155,19 +163,23 @@ class WristSensor:
         """(3,) Standard deviation of the filtered moment [N m]."""
         return np.sqrt(self.noise_moment**2 * self._gain_moment + self.resolution[1] ** 2)
 
-    def _wrench(self, state: ControlState) -> tuple[_Vec, _Vec]:
-        return self.wrist.contact_wrench(state, self.centre_body, self.accel if self._a_accel else self._zero)
+    def _wrench(self, state: ControlState, accel_ref: _Vec | None) -> tuple[_Vec, _Vec]:
+        if accel_ref is None:
+            accel_ref = self.accel if self._a_accel else self._zero
+        return self.wrist.contact_wrench(state, self.centre_body, accel_ref)
 
-    def raw(self, state: ControlState) -> tuple[_Vec, _Vec]:
-        """The tared, unfiltered wrench (force [N], moment [N m], world)."""
-        f, tau = self._wrench(state)
+    def raw(self, state: ControlState, *, accel_ref: _Vec | None = None) -> tuple[_Vec, _Vec]:
+        """The tared, unfiltered wrench (force [N], moment [N m], world). ``accel_ref`` (3,)
+        [m/s^2]: the hand's acceleration to compensate; None: the measured one (``accel_hz``),
+        or zero."""
+        f, tau = self._wrench(state, accel_ref)
         return f - self.force_bias, tau - rotate(state.quat_world, self.moment_bias_body)
 
-    def accumulate_tare(self, state: ControlState) -> None:
+    def accumulate_tare(self, state: ControlState, *, accel_ref: _Vec | None = None) -> None:
         """Add this reading to the tare and the noise estimate (the hand must be free of
         contact and at rest)."""
         self._track_accel(state)
-        f, tau = self._wrench(state)
+        f, tau = self._wrench(state, accel_ref)
         tau_body = rotate_inv(state.quat_world, tau)
         self._n += 1
         d_f, d_m = f - self.force_bias, tau_body - self.moment_bias_body
@@ -179,19 +191,23 @@ class WristSensor:
             self.noise_force = np.sqrt(self._m2_force / (self._n - 1))
             self.noise_moment = np.sqrt(self._m2_moment / (self._n - 1))
 
-    def update(self, state: ControlState, *, free: bool = False) -> tuple[_Vec, _Vec]:
+    def update(
+        self, state: ControlState, *, free: bool = False, accel_ref: _Vec | None = None
+    ) -> tuple[_Vec, _Vec]:
         """Filter in this reading (taring first while the timed tare runs; following the bias
-        while ``free``); the filtered wrench."""
+        while ``free``); the filtered wrench. ``accel_ref`` as for :meth:`raw`."""
         if state.t - self._t0 < self.tare_time:
-            self.accumulate_tare(state)
+            self.accumulate_tare(state, accel_ref=accel_ref)
         else:
             self._track_accel(state)
-        f, tau = self.raw(state)
+        f, tau = self.raw(state, accel_ref=accel_ref)
         if free and self._n:
             self.force_bias += self._a_bias * f
             self.moment_bias_body += self._a_bias * rotate_inv(state.quat_world, tau)
         self.force += self._a_force * (f - self.force)
         self.moment += self._a_moment * (tau - self.moment)
+        if self.fast_moment:
+            self.moment_fast += self._a_force * (tau - self.moment_fast)
         return self.force, self.moment
 
     def _track_accel(self, state: ControlState) -> None:
@@ -209,13 +225,70 @@ class WristSensor:
         f_body = rotate_inv(state.quat_world, self.force_bias)
         self.moment_bias_body = self.moment_bias_body + cross(self.centre_body - centre, f_body)
         q = state.quat_world
-        self.moment = self.moment + cross(rotate(q, self.centre_body) - rotate(q, centre), self.force)
+        arm = rotate(q, self.centre_body) - rotate(q, centre)
+        self.moment = self.moment + cross(arm, self.force)
+        if self.fast_moment:
+            self.moment_fast = self.moment_fast + cross(arm, self.force)
         self.centre_body = centre
 
     def moment_about(self, state: ControlState, point_body: _Vec) -> _Vec:
         """The filtered moment moved to another point of the gripper frame [N m], world."""
         q = state.quat_world
         return self.moment + cross(rotate(q, self.centre_body) - rotate(q, point_body), self.force)
+
+
+class WrenchPredictor:
+    """The contact wrench *now*, from a filtered reading ``latency`` [s] old: a Smith predictor
+    on a linear contact model.
+
+    A controller that moves its command ``s`` along an axis against a contact of stiffness ``K``
+    changes the contact wrench on the hand by ``-K ds``. The sensor reports that change
+    ``latency`` late, and the estimate's first-order filter later still. The predictor corrects
+    the filtered reading for the command's own motion that the reading cannot show yet::
+
+        w_now = w_read - K (s_now - s_seen)
+
+    ``s_seen`` is the command as the reading reflects it: ``s`` delayed by ``latency`` (a
+    :class:`~peg_ctrl.sim.ft_model.DelayLine`, the sensor's own rule) and passed through the
+    reading's filter (gain ``alpha`` per axis, :func:`lowpass_alpha`), so the filter's lag is
+    predicted too. Where the model is right (``K`` the contact's stiffness) the loop no longer
+    sees the delay nor the filter; where the contact is softer than ``K`` (free space, a peg
+    turning on one point of its rim) the correction acts as extra damping, about ``K`` times
+    the latency and the filter's time constant, on an accommodation law.
+
+    Call :meth:`predict` once per reading, with the command in effect since the last one.
+    """
+
+    def __init__(
+        self, *, stiffness: NDArray[np.float64], latency: float, dt: float, alpha: NDArray[np.float64]
+    ) -> None:
+        self.stiffness = np.asarray(stiffness, dtype=float)
+        self.alpha = np.asarray(alpha, dtype=float)
+        if self.alpha.shape != self.stiffness.shape:
+            raise ValueError(f"alpha {self.alpha.shape} and stiffness {self.stiffness.shape} differ in shape")
+        self.latency = latency
+        self._line = DelayLine(latency=latency, dt=dt, width=self.stiffness.size)
+        self.reset(np.zeros(self.stiffness.size))
+
+    def reset(self, command: _Vec) -> None:
+        """Forget the history: the command has been ``command`` (n,) for ever."""
+        self._line.reset(command)
+        self.seen = np.array(command, dtype=float)  # s_seen (n,)
+        self.correction = np.zeros(self.stiffness.size)  # the last -K (s_now - s_seen) (n,)
+
+    def restart(self, where: NDArray[np.bool_], command: _Vec) -> None:
+        """Forget the history on the axes ``where`` (n,): an axis whose command starts afresh (it
+        has just become wrench-controlled) has moved in no way the reading could miss."""
+        if where.any():
+            self._line.reset(command, where)
+            self.seen[where] = command[where]
+
+    def predict(self, reading: _Vec, command: _Vec) -> _Vec:
+        """The wrench now (n,) from the filtered ``reading`` (n,) [N, N m] and the ``command``
+        (n,) in effect [m, rad]."""
+        self.seen += self.alpha * (self._line.push(command) - self.seen)
+        self.correction = -self.stiffness * (command - self.seen)
+        return reading + self.correction
 
 
 class Detector:

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from peg_ctrl.commands import euler_to_quat
+from peg_ctrl.commands import GripperTarget, euler_to_quat
 from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceController
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.run.tracker import Tracker
@@ -38,7 +38,8 @@ def test_inner_pd_is_configured_and_runs_at_our_period(model: mujoco.MjModel) ->
 
 def _at_rest_wrench(c: AdmittanceController, state: ControlState, push_world: np.ndarray) -> np.ndarray:
     """The sensor reading for the gripper at rest under its weight and an external push [N]."""
-    f_world = -c.loop.wrist.mass * c.loop.wrist.gravity - push_world  # what external_force() inverts
+    wrist = c.loop.sensor.wrist
+    f_world = -wrist.mass * wrist.gravity - push_world  # what external_force() inverts
     f_site = np.empty(3)
     q = state.quat_world
     mujoco.mju_rotVecQuat(f_site, f_world, np.array([q[0], -q[1], -q[2], -q[3]]))
@@ -142,20 +143,28 @@ def test_rotational_admittance_turns_like_a_spring(model: mujoco.MjModel) -> Non
 # -- moment-controlled axes ----------------------------------------------------------------------
 
 
+def _tared_on_moment_axes(
+    model: mujoco.MjModel, home_state: ControlState, **changes: float
+) -> tuple[AdmittanceController, ControlState, GripperTarget]:
+    """An admittance about a centre 70 mm below the pinch point (``moment_damping`` 1 and
+    ``changes``), tared over 50 ms at rest, free of contact; the rest state and a target that
+    flags the tilt axes moment-controlled at zero moment."""
+    cfg = AdmittanceConfig(compliance_center=(0.0, 0.0, -0.07), moment_damping=1.0, tare_time=0.05)
+    c = AdmittanceController(model, dataclasses.replace(cfg, **changes))
+    rest = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.zeros(3)))
+    c.reset(rest)
+    free = target(rest.p_world).with_wrench((0.0, 0.0, 0.0), axes=(False,) * 3 + (True, True, False))
+    for i in range(50):
+        c.compute(rest._replace(t=0.001 * i), free)
+    return c, rest, free
+
+
 def test_a_moment_axis_turns_the_command_until_the_moment_is_gone(
     model: mujoco.MjModel, home_state: ControlState
 ) -> None:
     """A sensed moment about x on a moment-controlled axis turns the command about the centre at
     M / D_m (capped), and only about that axis; a pose target leaves the turn at zero."""
-    cfg = AdmittanceConfig(
-        compliance_center=(0.0, 0.0, -0.07), moment_damping=1.0, max_turn_rate=0.02, tare_time=0.05
-    )
-    c = AdmittanceController(model, cfg)
-    rest = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.zeros(3)))
-    c.reset(rest)
-    free = target(rest.p_world).with_wrench((0.0, 0.0, 0.0), axes=(False,) * 3 + (True, True, False))
-    for i in range(50):  # the tare: 50 ms at rest, free of contact
-        c.compute(rest._replace(t=0.001 * i), free)
+    c, rest, free = _tared_on_moment_axes(model, home_state, max_turn_rate=0.02)
     torque = np.array([0.0, 0.0, 0.0, 0.03, 0.0, 0.0])  # a contact's moment about x at the sensor
     state = rest._replace(t=0.05, ft_wrench=rest.ft_wrench - torque)
     for _ in range(2000):  # 2 s: the 5 Hz moment filter settles, the turn runs at its rate
@@ -164,3 +173,25 @@ def test_a_moment_axis_turns_the_command_until_the_moment_is_gone(
     assert abs(c.turn[1]) < 1e-9 and abs(c.turn[2]) < 1e-9
     c.compute(state, target(state.p_world))
     assert np.all(c.turn == 0.0)  # no longer moment-controlled: the task re-anchors
+
+
+def test_a_moment_axis_turns_slower_after_its_moment_reverses(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """``reversal_backoff``: once the moment has crossed from beyond +band to beyond -band, the
+    axis turns at M / (2 D_m); the other axis, which did not reverse, at M / D_m."""
+    c, rest, free = _tared_on_moment_axes(model, home_state, reversal_backoff=2.0)
+
+    def turn_rate(moment: tuple[float, float], steps: int) -> np.ndarray:
+        torque = np.array([0.0, 0.0, 0.0, *moment, 0.0])
+        state = rest._replace(t=0.05, ft_wrench=rest.ft_wrench - torque)
+        for _ in range(steps):  # the 5 Hz moment filter settles
+            before = c.turn.copy()
+            c.compute(state, free)
+        return (c.turn - before) / 0.001
+
+    rate = turn_rate((0.01, 0.01), 1500)
+    np.testing.assert_allclose(np.abs(rate[:2]), [0.01, 0.01], rtol=0.01)
+    rate = turn_rate((-0.01, 0.01), 1500)
+    np.testing.assert_allclose(np.abs(rate[:2]), [0.005, 0.01], rtol=0.01)
+    np.testing.assert_array_equal(c.loop.backoff.scale, [2.0, 1.0, 1.0])

@@ -147,3 +147,146 @@ def test_solve_times_are_kept_per_optimiser(model: mujoco.MjModel, home_state: C
     assert set(timings) == {"effort_qp", "contact_qp"}
     assert len(timings["effort_qp"].times_s) == 3 and timings["effort_qp"].period_s == c.config.mpc_dt
     assert len(timings["contact_qp"].times_s) == 30 and timings["contact_qp"].period_s == 0.001
+
+
+def test_a_backoff_slows_the_accommodation() -> None:
+    """``backoff`` multiplies an axis's damping and divides its minimum rate."""
+    qp = ContactQP(_settings())
+    backoff = np.array([1.0, 1.0, 1.0, 4.0, 1.0, 1.0])
+    plan = qp.solve(MOMENT_XY, _wrench(mx=0.01, my=0.01), _wrench(), backoff)
+    assert plan.rate[3] == pytest.approx(0.01 / (0.5 * 4.0))
+    assert plan.rate[4] == pytest.approx(0.01 / 0.5)
+    creep = qp.solve(MOMENT_XY, _wrench(mx=1e-4), _wrench(), backoff)  # below D v_min
+    assert creep.rate[3] == pytest.approx(5e-4 / 4.0)  # the minimum rate, slowed too
+
+
+# -- a late sensor -------------------------------------------------------------------------------
+
+PRESS = (False, False, True, True, True, False)
+
+
+def _pressing(c: MPCController, state: ControlState, steps: int) -> list[np.ndarray]:
+    """Run ``c`` on ``state`` pushed by 2 N from below, pressing 3 N down with the tilt axes
+    moment-controlled; the wrench each contact QP solve was handed."""
+    assert c.contact is not None
+    handed: list[np.ndarray] = []
+    solve = c.contact.qp.solve
+
+    def spy(axes: np.ndarray, measured: np.ndarray, wanted: np.ndarray, backoff: np.ndarray | None = None):  # type: ignore[no-untyped-def]
+        handed.append(measured.copy())
+        return solve(axes, measured, wanted, backoff)
+
+    c.contact.qp.solve = spy  # type: ignore[method-assign]
+    c.reset(state)
+    goal = target(state.p_world).with_wrench((0.0, 0.0, -3.0), axes=PRESS)
+    for k in range(steps):
+        pushed = state._replace(t=0.001 * k, ft_wrench=state.ft_wrench + [0.0, 0.0, 2.0, 0.01, 0.0, 0.0])
+        c.compute(pushed, goal)
+    return handed
+
+
+def test_without_a_latency_the_qp_plans_from_the_filtered_reading(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    c = MPCController(model, MPCConfig(formulation="contact", control_dt=0.001, sensor_latency=0.0))
+    assert c.contact is not None and c.contact.predictor is None
+    handed = _pressing(c, home_state, 20)
+    sensor = c.contact.sensor
+    np.testing.assert_array_equal(handed[-1], np.concatenate([sensor.force, sensor.moment]))
+    assert len(handed) == 20
+
+
+def test_with_a_latency_the_qp_plans_from_the_predicted_wrench(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    c = MPCController(model, MPCConfig(formulation="contact", control_dt=0.001, sensor_latency=0.01))
+    assert c.contact is not None and c.contact.predictor is not None
+    handed = _pressing(c, home_state, 60)
+    sensor, predictor = c.contact.sensor, c.contact.predictor
+    reading = np.concatenate([sensor.force, sensor.moment])
+    np.testing.assert_allclose(handed[-1], reading + predictor.correction, rtol=0, atol=1e-15)
+    # The command moved down into the push (a turn too): the prediction is the reading corrected
+    # for it, on the wrench-controlled axes only.
+    assert predictor.correction[2] != 0.0 and predictor.correction[3] != 0.0
+    np.testing.assert_array_equal(predictor.correction[[0, 1, 5]], 0.0)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("sensor_latency", -0.01, "must be finite and >= 0"),
+        ("reversal_backoff", 0.5, r"must be >= 1 \(1: never\), got 0.5"),
+        ("reversal_band", -1e-3, "must be finite and >= 0"),
+    ],
+)
+def test_the_latency_fields_are_checked(field: str, value: float, message: str) -> None:
+    with pytest.raises(ConfigError, match=rf"mpc.{field}: {message}"):
+        MPCConfig(**{field: value})  # type: ignore[arg-type]
+
+
+# -- the align press with a late sensor (physics) ------------------------------------------------
+
+TIP = (0.0, -0.07, -0.01)
+CONTACT_MPC = {  # the contact MPC of the studies (contact_hard)
+    "name": "mpc",
+    "formulation": "contact",
+    "compliance_center": list(TIP),
+    "force_limit": 10.0,
+    "force_damping": [2000.0, 2000.0, 400.0],
+    "tare_time": 0.25,
+    "control_dt": 0.001,
+    "contact_dt": 0.002,
+}
+
+
+def _align_press(controller: dict[str, object], budget: float) -> tuple[float, np.ndarray, float]:
+    """The held insertion's align press (friction 0.9, 3 mm, 2 degrees) with the F/T reading
+    10 ms late: (its duration [s], the peg-block force over its last 0.3 s [N], the peg's tilt
+    at its end [deg]); stopped ``budget`` s in if it has not ended."""
+    from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
+
+    config = episode_config_from_mapping(
+        {
+            "controller": controller,
+            "seed": 100,
+            "task": {
+                "name": "held_insertion",
+                "strategy": {"name": "align"},
+                "lateral_error": 0.003,
+                "tilt_error": float(np.radians(2.0)),
+            },
+            "physics": {"profile": "precision"},
+            "scene": {"assets": {"clearance": 0.00005, "chamfer": 0.001}, "friction": 0.9},
+            "randomization": {"enabled": True},
+            "domain": {"ft_latency": 0.01},
+        }
+    )
+    loop = build_loop(config)
+    loop.reset(np.random.default_rng(100))
+    start, force = None, []
+    while True:
+        loop.step()
+        t = float(loop.data.time)
+        if loop.task.phase == "align":
+            start = t if start is None else start
+            force.append(loop.peg.force_block)
+        if start is not None and (loop.task.phase != "align" or t - start >= budget):
+            break
+    axis = loop.peg.axis_world
+    return t - start, np.array(force[-300:]), float(np.degrees(np.arccos(abs(axis[2]))))
+
+
+@pytest.mark.slow
+def test_with_10_ms_latency_the_align_press_settles_with_the_reversal_backoff() -> None:
+    """Uncompensated, the press rocks the peg from rim to rim (the force swings by several N)
+    and never passes the flatness test; with the backoff and a 3.5 Hz moment filter it settles
+    flat within 2 s with the force within 0.2 N of the 3 N asked."""
+    rocking, force, _ = _align_press(CONTACT_MPC, budget=2.5)
+    assert rocking >= 2.5 and np.ptp(force) > 1.0
+    settled, force, tilt = _align_press(
+        {**CONTACT_MPC, "reversal_backoff": 2.0, "moment_filter_hz": 3.5}, budget=2.5
+    )
+    assert settled < 2.0
+    # The last 0.3 s include the flatness hold and the 0.15 s light press that ends the phase.
+    assert np.all(np.abs(force[:100] - 3.0) < 0.2)
+    assert tilt < 0.02

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from peg_ctrl.errors import ConfigError, UnknownComponent
-from peg_ctrl.sim.ft_model import FT_PRESETS, FTSensorModel, FTSensorStream, ft_preset
+from peg_ctrl.sim.ft_model import FT_PRESETS, DelayLine, FTSensorModel, FTSensorStream, ft_preset
 
 WRENCH = np.array([1.0, -2.0, 3.0, 0.1, -0.2, 0.3])
 
@@ -180,3 +180,36 @@ def test_a_bad_value_is_refused_naming_the_field_and_the_range(field: str, unit:
 def test_a_bad_reading_period_is_refused(dt: float) -> None:
     with pytest.raises(ConfigError, match=r"^dt must be finite and > 0 s"):
         FTSensorStream(FT_PRESETS["wrist"], dt=dt, rng=np.random.default_rng(0))
+
+
+# -- the delay line the stream and the wrench predictor share -----------------------------------
+
+
+@pytest.mark.parametrize("periods", [0.0, 0.4, 3.0, 7.5])
+def test_the_delay_line_delays_any_width_like_the_reference(periods: float) -> None:
+    dt = 0.002
+    signal = np.random.default_rng(2).normal(size=(40, 2)).cumsum(axis=0)
+    line = DelayLine(latency=periods * dt, dt=dt, width=2)
+    line.reset(signal[0])
+    out = np.array([line.push(x) for x in signal])
+    n = np.arange(len(signal), dtype=float)
+    expected = np.stack([np.interp(n - periods, n, signal[:, c]) for c in range(2)], axis=1)
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12)
+
+
+def test_the_delay_line_can_forget_some_channels() -> None:
+    """``reset(value, where)``: those channels have been ``value`` for ever, the others keep
+    their history."""
+    line = DelayLine(latency=0.003, dt=0.001, width=3)
+    line.reset(np.zeros(3))
+    for k in range(1, 4):
+        line.push(np.full(3, float(k)))  # 1, 2, 3
+    line.reset(np.array([9.0, 9.0, 9.0]), np.array([False, True, False]))
+    np.testing.assert_array_equal(line.push(np.full(3, 4.0)), [1.0, 9.0, 1.0])
+    np.testing.assert_array_equal(line.push(np.full(3, 5.0)), [2.0, 9.0, 2.0])
+
+
+@pytest.mark.parametrize("latency", [-0.001, math.nan, math.inf])
+def test_a_bad_latency_is_refused(latency: float) -> None:
+    with pytest.raises(ConfigError, match=r"^latency must be finite and >= 0 s"):
+        DelayLine(latency=latency, dt=0.001, width=6)
