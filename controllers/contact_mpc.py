@@ -106,6 +106,7 @@ class ContactSettings:
     tare_time: float  # sensor tare over the first seconds after reset [s]
     force_filter_hz: float
     moment_filter_hz: float
+    accel_filter_hz: float = 0.0  # the sensor's acceleration compensation [Hz]; 0: none
     latency: float = 0.0  # the sensor's latency the wrench is predicted across [s]; 0: none
     reversal_backoff: float = 1.0  # a moment axis's damping grows by this at each reversal; 1: never
     reversal_band: float = 0.004  # a reversal crosses from beyond +band to beyond -band [N m]
@@ -227,6 +228,7 @@ class ContactLoop:
             force_hz=settings.force_filter_hz,
             moment_hz=settings.moment_filter_hz,
             tare_time=settings.tare_time,
+            accel_hz=settings.accel_filter_hz,
         )
         self.backoff = ReversalBackoff(factor=settings.reversal_backoff, band=settings.reversal_band, size=6)
         self.predictor: WrenchPredictor | None = None

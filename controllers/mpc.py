@@ -97,6 +97,7 @@ class MPCConfig(ControllerConfig):
         "contact_smoothing",
         "sensor_latency",
         "reversal_band",
+        "accel_filter_hz",
     )
     horizon: int = 15  # steps
     control_dt: float = 0.005  # [s] 200 Hz: outcomes as at 1 kHz (docs/performance.md)
@@ -129,6 +130,9 @@ class MPCConfig(ControllerConfig):
     tare_time: float = 0.0  # sensor tare over the first seconds after reset [s]; 0: none
     force_filter_hz: float = 20.0  # low-pass on the sensed force [Hz]
     moment_filter_hz: float = 5.0  # low-pass on the sensed moment [Hz]
+    # The hand's inertia taken out of the reading along its measured acceleration, low-passed at
+    # this [Hz] (peg_ctrl.sim.sensing.WristSensor); 0: not (a hop or a stop then reads as a push).
+    accel_filter_hz: float = 0.0
     # The F/T reading's latency [s] that the contact QP predicts the wrench across (a Smith
     # predictor on its contact model, peg_ctrl.controllers.contact_mpc); 0: the reading as it is.
     sensor_latency: float = 0.0
@@ -347,6 +351,7 @@ class MPCController(ControllerBase[MPCConfig]):
             tare_time=c.tare_time,
             force_filter_hz=c.force_filter_hz,
             moment_filter_hz=c.moment_filter_hz,
+            accel_filter_hz=c.accel_filter_hz,
             latency=c.sensor_latency,
             reversal_backoff=c.reversal_backoff,
             reversal_band=c.reversal_band,

@@ -25,6 +25,9 @@ strategies and disturbances as well::
     grid:                                   # any dotted episode-config keys, crossed
       task.lateral_error: [0.0005, 0.0015, 0.003]
       task.tilt_error: [0.0, 0.02618]
+      sensor:                               # a linked axis: its keys move together
+        domain.ft_sensor: [ideal, forge]
+        task.position_noise: [0.0, 0.0005]
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ class ExperimentConfig:
     # a controller not listed meets every one of ``strategies``.
     arms: dict[str, Any] = dataclasses.field(default_factory=dict)
     scene: SceneConfig = SceneConfig()  # the base scene; ``clearances`` replaces its clearance
-    grid: dict[str, Any] = dataclasses.field(default_factory=dict)  # dotted key -> list of values
+    grid: dict[str, Any] = dataclasses.field(default_factory=dict)  # dotted key -> values, or linked axes
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -117,16 +120,7 @@ class ExperimentConfig:
                 raise ConfigError(f"strategies: repeated strategies {names}")
         self._check_arms()
         for key, values in self.grid.items():
-            if not isinstance(key, str) or not key:
-                raise ConfigError(f"grid: keys must be dotted field names, got {key!r}")
-            if not isinstance(values, list) or not values:
-                raise ConfigError(f"grid.{key}: expected a non-empty list of values, got {values!r}")
-            if key.split(".")[0] in _NOT_IN_GRID or key in _NOT_IN_GRID:
-                raise ConfigError(
-                    f"grid.{key}: sweep this with controllers/strategies/planners/clearances/seeds"
-                )
-            if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
-                raise ConfigError(f"grid.{key}: repeated values {values!r}")
+            _check_axis(key, values)
         # Every grid cell must make a valid episode config (and the scene must suit the physics).
         base = _episode(
             self,
@@ -170,11 +164,59 @@ class ExperimentConfig:
 _NOT_IN_GRID = ("controller", "seed", "planner", "task.strategy", "task.name", "scene.assets.clearance")
 
 
+def _check_axis(key: Any, values: Any) -> None:
+    """One grid axis: a dotted key with a list of values, or a linked axis (a plain name with a
+    mapping of dotted keys to lists of one length, which move together)."""
+    if not isinstance(key, str) or not key:
+        raise ConfigError(f"grid: keys must be dotted field names, got {key!r}")
+    if isinstance(values, dict) and "." not in key:
+        if not values:
+            raise ConfigError(f"grid.{key}: a linked axis needs at least one dotted key")
+        lengths = {len(v) if isinstance(v, list) else -1 for v in values.values()}
+        for sub, sub_values in values.items():
+            if not isinstance(sub, str) or "." not in sub:
+                raise ConfigError(
+                    f"grid.{key}: keys of a linked axis must be dotted field names, got {sub!r}"
+                )
+            _check_values(f"{key}.{sub}", sub, sub_values)
+        if len(lengths) != 1:
+            raise ConfigError(
+                f"grid.{key}: the lists of a linked axis must have one length, got "
+                + ", ".join(f"{sub}: {len(v)}" for sub, v in values.items())
+            )
+        levels = list(zip(*values.values(), strict=True))
+        if len({json.dumps(level, sort_keys=True) for level in levels}) != len(levels):
+            raise ConfigError(f"grid.{key}: repeated levels {levels!r}")
+        return
+    if "." not in key and key not in _NOT_IN_GRID:
+        raise ConfigError(
+            f"grid.{key}: expected a dotted field name with a list of values, or a linked axis "
+            f"(a name with a mapping of dotted keys to lists), got {values!r}"
+        )
+    _check_values(key, key, values)
+    if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+        raise ConfigError(f"grid.{key}: repeated values {values!r}")
+
+
+def _check_values(where: str, key: str, values: Any) -> None:
+    if not isinstance(values, list) or not values:
+        raise ConfigError(f"grid.{where}: expected a non-empty list of values, got {values!r}")
+    if key.split(".")[0] in _NOT_IN_GRID or key in _NOT_IN_GRID:
+        raise ConfigError(f"grid.{where}: sweep this with controllers/strategies/planners/clearances/seeds")
+
+
+def _levels(key: str, values: Any) -> list[dict[str, Any]]:
+    """An axis's levels, each as dotted key -> value (a linked axis sets all its keys at once)."""
+    if isinstance(values, dict):
+        return [dict(zip(values, level, strict=True)) for level in zip(*values.values(), strict=True)]
+    return [{key: value} for value in values]
+
+
 def cells(exp: ExperimentConfig) -> list[dict[str, Any]]:
     """The grid's cells (dotted key -> value), crossed in file order; one empty cell without a grid."""
     out: list[dict[str, Any]] = [{}]
     for key, values in exp.grid.items():
-        out = [{**cell, key: value} for cell in out for value in values]
+        out = [{**cell, **level} for cell in out for level in _levels(key, values)]
     return out
 
 
@@ -221,8 +263,32 @@ def apply_experiment_overrides(data: dict[str, Any], assignments: list[str]) -> 
     grid = result.get("grid")
     if isinstance(grid, dict):
         for item in assignments:
-            grid.pop(item.partition("=")[0].strip(), None)
+            key = item.partition("=")[0].strip()
+            grid.pop(key, None)
+            for name, axis in list(grid.items()):
+                if isinstance(axis, dict) and key in axis:
+                    _fix_linked(grid, name, axis, key, _dig(result, key))
     return result
+
+
+def _dig(data: dict[str, Any], key: str) -> Any:
+    node: Any = data
+    for part in key.split("."):
+        node = node.get(part) if isinstance(node, dict) else None
+    return node
+
+
+def _fix_linked(grid: dict[str, Any], name: str, axis: dict[str, Any], key: str, value: Any) -> None:
+    """``--set`` on a key of a linked axis: keep the level where that key has the value (its
+    other keys move with it), or drop the axis when no level has it."""
+    values = axis[key]
+    if isinstance(values, list) and value in values:
+        i = values.index(value)
+        grid[name] = {k: [v[i]] for k, v in axis.items() if k != key and isinstance(v, list)}
+        if not grid[name]:
+            grid.pop(name)
+    else:
+        grid.pop(name)
 
 
 def load_experiment(path: Path) -> ExperimentConfig:
@@ -310,10 +376,6 @@ def expand(exp: ExperimentConfig) -> list[Job]:
     return jobs
 
 
-# The F/T sensor fields that came with its model (docs/sensing.md). An episode that leaves every
-# F/T field at its default is hashed without them, so it keeps the key it had before they existed
-# (the keys in a report, such as docs/contact_hard/episodes.csv, still name its episodes); one
-# that sets any of them, or force_noise (it no longer means what it did), is hashed whole.
 def episode_key(cfg: EpisodeConfig) -> str:
     """An episode's identity: 16 hex digits of the SHA-256 of its config as JSON."""
     blob = json.dumps(to_dict(cfg), sort_keys=True).encode()

@@ -38,11 +38,14 @@ _CONDITION_LABELS = {
     "task.lateral_error": ("lateral error at first contact [mm]", 1e3),
     "task.tilt_error": ("peg tilt in the grasp [deg]", 180.0 / math.pi),
     "task.position_noise": ("noise on the observed hole position [mm]", 1e3),
+    "scene.friction": ("friction coefficient", 1.0),
+    "domain.ft_sensor": ("force/torque sensor model", 1.0),
     "peg_mass_scale": ("peg mass scale (drawn per seed)", 1.0),
     "friction_scale": ("friction scale (drawn per seed)", 1.0),
     "gain_scale": ("controller gain scale (drawn per seed)", 1.0),
 }
 _DOMAIN_COLUMNS = ("peg_mass_scale", "friction_scale", "gain_scale")
+_MAX_CELL_COLUMNS = 12  # a larger grid's success table is folded onto its axes
 _MAX_LEVELS = 6  # a condition with more distinct values than this is drawn in quartile bins
 _SEATED, _FAILED = "#2ca02c", "#d62728"
 _CAPTIONS = {
@@ -77,7 +80,8 @@ def arm_of(row: dict[str, Any]) -> str:
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per arm (controller/strategy) x planner x clearance, in order of first appearance: success
     rate with its 95 % Wilson interval, peak peg-block force [N] median (bootstrap 95 % interval)
-    and p95, time to insert [s] median (interval), contact to seated [s], impulse [N s] median
+    and p95 and share within 10 N, time to insert [s] median (interval), contact to seated [s]
+    median and p95, impulse [N s] median
     and the failure reasons."""
     if not rows:
         return []
@@ -114,6 +118,8 @@ def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "time_to_insert_median_ci95_low_s": time_ci[1],
                 "time_to_insert_median_ci95_high_s": time_ci[2],
                 "contact_to_seat_median_s": float(np.median(seat)) if seat else None,
+                "contact_to_seat_p95_s": float(np.percentile(seat, 95)) if seat else None,
+                "peak_force_within_10n": float(np.mean(forces <= 10.0)),
                 "impulse_median_ns": float(np.median(impulses)) if impulses else None,
                 "failure_reasons": ";".join(f"{k}:{v}" for k, v in reasons.items()),
             }
@@ -199,14 +205,23 @@ def swept_conditions(df: Any) -> list[str]:
     varies and that success can be plotted against: the clearance, every grid key (dotted
     column) and the per-seed domain draws, each when it takes more than one value."""
     candidates = ["clearance_m", *[c for c in df.columns if "." in c], *_DOMAIN_COLUMNS]
-    found = []
+    found: list[str] = []
     for column in candidates:
-        if column not in df:
+        if column not in df or df[column].astype(str).nunique() < 2:
             continue
-        values = _numeric(df[column])
-        if values.notna().all() and values.nunique() > 1:
-            found.append(column)
+        numeric = _numeric(df[column]).notna().all()
+        if not numeric and "." not in column:
+            continue  # a named grid value (a sensor preset) is a condition; other text is not
+        if any(_same_levels(df, column, seen) for seen in found):
+            continue  # moves with an earlier condition (a linked grid axis): one plot says it
+        found.append(column)
     return found
+
+
+def _same_levels(df: Any, a: str, b: str) -> bool:
+    """Whether each value of column ``a`` goes with one value of ``b`` and back."""
+    pairs = df[[a, b]].astype(str).drop_duplicates()
+    return bool(pairs[a].is_unique and pairs[b].is_unique)
 
 
 def _numeric(series: Any) -> Any:
@@ -363,6 +378,9 @@ def _success_curves(
                 ax.errorbar(
                     x, y, yerr=err, marker="o", ms=4, capsize=3, color=colours[controller], label=controller
                 )
+            if table.attrs["labels"]:
+                ax.set_xticks(range(len(table.attrs["labels"])), table.attrs["labels"])
+                ax.set_xlim(-0.5, len(table.attrs["labels"]) - 0.5)
             if log_x:  # ticks at the swept values, written plainly
                 ax.set_xscale("log")
                 levels = np.unique(table["x"].to_numpy() * scale)
@@ -391,7 +409,11 @@ def _success_table(df: Any, column: str) -> Any:
     import pandas as pd
 
     values = _numeric(df[column])
-    binned = values.nunique() > _MAX_LEVELS
+    labels: list[str] = []
+    if values.isna().any():  # named levels (a sensor preset): at 0, 1, ... in the file's order
+        labels = list(dict.fromkeys(df[column].astype(str)))
+        values = df[column].astype(str).map({v: float(i) for i, v in enumerate(labels)})
+    binned = not labels and values.nunique() > _MAX_LEVELS
     if binned:
         bins = pd.qcut(values, q=4, duplicates="drop")
         x = values.groupby(bins, observed=True).transform("median")
@@ -403,6 +425,7 @@ def _success_table(df: Any, column: str) -> Any:
     table["low"] = [c[0] for c in ci]
     table["high"] = [c[1] for c in ci]
     table.attrs["binned"] = binned
+    table.attrs["labels"] = labels
     return table
 
 
@@ -614,6 +637,8 @@ def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
         return []
     df["won"] = df["status"] == "success"
     cells = list(dict.fromkeys(df[keys].itertuples(index=False, name=None)))
+    if len(cells) > _MAX_CELL_COLUMNS:
+        return _condition_section(df, keys)
     by_cell = df.groupby(["arm", *keys], sort=False).agg(
         wins=("won", "sum"), n=("won", "size"), force=("peak_contact_force_n", "median")
     )
@@ -639,6 +664,40 @@ def _cell_section(rows: list[dict[str, Any]]) -> list[str]:
             else:
                 cells_text.append("0/0, –")
         lines.append(f"| {arm} | " + " | ".join(cells_text) + " |")
+    return [*lines, ""]
+
+
+def _condition_section(df: Any, keys: list[str]) -> list[str]:
+    """Success, median peak force and median contact-to-seated per arm at each level of each grid
+    key, pooled over the others: the per-cell table of a large grid, folded onto its axes."""
+    import pandas as pd
+
+    column = (
+        "contact_to_seat_s" if df.get("contact_to_seat_s", pd.Series()).notna().any() else "time_to_insert_s"
+    )
+    df["time"] = pd.to_numeric(df[column].replace("", np.nan), errors="coerce")
+    levels = [(k, v) for k in keys for v in dict.fromkeys(df[k])]
+    lines = [
+        "## Success per condition",
+        "",
+        f"The grid has {len(set(df[keys].itertuples(index=False, name=None)))} cells; each column "
+        "pools the episodes at one level of one grid key (every cell per episode: episodes.csv). "
+        "Successes / episodes, median peak peg-block force [N], median time to insert [s] "
+        "(successes; for a held insertion from first contact to seated).",
+        "",
+        "| arm | " + " | ".join(f"{k.split('.')[-1]}={v}" for k, v in levels) + " |",
+        "|---|" + "---|" * len(levels),
+    ]
+    for arm, group in df.groupby("arm", sort=False):
+        texts = []
+        for key, value in levels:
+            at = group[group[key] == value]
+            time = at.loc[at["won"], "time"].median()
+            texts.append(
+                f"{int(at['won'].sum())}/{len(at)}, {at['peak_contact_force_n'].median():.1f} N, "
+                + ("–" if np.isnan(time) else f"{time:.1f} s")
+            )
+        lines.append(f"| {arm} | " + " | ".join(texts) + " |")
     return [*lines, ""]
 
 
@@ -754,6 +813,7 @@ def _summary_section(summary: list[dict[str, Any]]) -> list[str]:
         s["time_ci"] = _interval(
             s["time_to_insert_median_ci95_low_s"], s["time_to_insert_median_ci95_high_s"], "{:.2f}"
         )
+        s["within"] = f"{100 * s['peak_force_within_10n']:.0f} %"
     columns = [
         ("controller", "arm"),
         ("planner", "planner"),
@@ -763,9 +823,11 @@ def _summary_section(summary: list[dict[str, Any]]) -> list[str]:
         ("peak_force_median_n", "peak force median [N]"),
         ("force_ci", "95 % CI"),
         ("peak_force_p95_n", "peak force p95 [N]"),
+        ("within", "peak ≤ 10 N"),
         ("time_to_insert_median_s", "time to insert [s]"),
         ("time_ci", "95 % CI"),
-        ("contact_to_seat_median_s", "contact to seated [s]"),
+        ("contact_to_seat_median_s", "contact to seated median [s]"),
+        ("contact_to_seat_p95_s", "p95 [s]"),
         ("impulse_median_ns", "impulse median [N s]"),
         ("failure_reasons", "failures"),
     ]

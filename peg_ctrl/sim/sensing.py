@@ -104,7 +104,7 @@ class WristSensor:
         force_bias: (3,) the force bias, world frame [N]; moment_bias_body (3,) the moment's,
             gripper frame [N m].
         noise_force: (3,) standard deviation of one force reading, world axes [N] (0 before a tare).
-        noise_moment: (3,) ... of one moment reading [N m].
+        noise_moment: (3,) ... of one moment reading, gripper axes (like its bias) [N m].
     """
 
     def __init__(

@@ -281,6 +281,60 @@ def test_set_fixes_a_swept_key_and_the_seed_count() -> None:
     assert len(exp.seeds) == 40 and len(jobs) == len(exp.controllers) * len(exp.strategies) * 2 * 40
 
 
+_LINKED = {
+    "controllers": [{"name": "pd"}],
+    "seeds": 1,
+    "task": {"name": "held_insertion"},
+    "grid": {
+        "scene.friction": [0.3, 0.9],
+        "sensor": {"domain.ft_sensor": ["ideal", "wrist", "forge"], "task.position_noise": [0.0, 5e-4, 5e-4]},
+    },
+}
+
+
+def test_a_linked_axis_moves_its_keys_together() -> None:
+    jobs = expand(experiment_from_mapping(_LINKED))
+    assert len(jobs) == 2 * 3
+    pairs = {(j.config.domain.ft_sensor, j.config.task.position_noise) for j in jobs}  # type: ignore[attr-defined]
+    assert pairs == {("ideal", 0.0), ("wrist", 5e-4), ("forge", 5e-4)}
+    assert set(jobs[0].cell) == {"scene.friction", "domain.ft_sensor", "task.position_noise"}
+
+
+@pytest.mark.parametrize(
+    "setting, pairs",
+    [
+        ("domain.ft_sensor=forge", {("forge", 5e-4)}),  # the level where the key has that value
+        ("domain.ft_sensor=ideal", {("ideal", 0.0)}),
+        ("task.position_noise=0.001", {("", 0.001)}),  # no such level: the axis goes (no preset)
+    ],
+)
+def test_set_on_a_linked_key_keeps_its_level(setting: str, pairs: set[tuple[str, float]]) -> None:
+    from peg_ctrl.experiments.config import apply_experiment_overrides
+
+    jobs = expand(experiment_from_mapping(apply_experiment_overrides(_LINKED, [setting])))
+    assert {(j.config.domain.ft_sensor, j.config.task.position_noise) for j in jobs} == pairs  # type: ignore[attr-defined]
+    assert len(jobs) == 2
+
+
+@pytest.mark.parametrize(
+    "axis, message",
+    [
+        ({"domain.ft_sensor": ["ideal", "forge"], "task.position_noise": [0.0]}, "must have one length"),
+        ({"domain.ft_sensor": ["ideal", "ideal"], "task.position_noise": [0.0, 0.0]}, "repeated levels"),
+        ({"ft_sensor": ["ideal"]}, "keys of a linked axis must be dotted field names, got 'ft_sensor'"),
+        ({"domain.ft_sensor": "forge"}, "grid.sensor.domain.ft_sensor: expected a non-empty list"),
+        ({"domain.ft_sensor": ["ideal", "laser"]}, "ft_sensor"),
+        ({}, "a linked axis needs at least one dotted key"),
+    ],
+)
+def test_a_bad_linked_axis_is_named(axis: dict[str, object], message: str) -> None:
+    from peg_ctrl.config import ConfigError
+
+    data = {**_LINKED, "grid": {"sensor": axis}}
+    with pytest.raises(ConfigError, match=message):
+        experiment_from_mapping(data)
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
@@ -460,6 +514,59 @@ def test_a_report_from_episodes_csv_alone_leaves_out_the_trace_plots(tmp_path: P
         assert not (tmp_path / name).exists(), name
     assert "force traces (`episodes/<key>/forces.npz`) are not in this directory" in report
     assert "| pd/spiral | 8/8, 33.5 N | 2/8, 33.5 N |" in report  # the grid-cell table
+
+
+def _sensor_rows() -> list[dict]:
+    """_contact_rows with a linked sensor axis (preset names, and the hole noise that goes with
+    them), friction and tilt set by the seed: 16 cells per arm, one episode each."""
+    rows = []
+    for row in _contact_rows():
+        seed = int(row["seed"])
+        sensor = ("ideal", "forge")[seed % 2]
+        won = row["status"] == "success" and not (sensor == "forge" and row["arm"].startswith("pd"))
+        rows.append(
+            {
+                **row,
+                "status": "success" if won else "failure",
+                "contact_to_seat_s": str(2.0 + seed) if won else "",
+                "scene.friction": ("0.3", "0.9")[(seed // 2) % 2],
+                "task.tilt_error": ("0.0", "0.035")[seed // 4],
+                "domain.ft_sensor": sensor,
+                "task.position_noise": ("0.0", "0.0005")[seed % 2],
+            }
+        )
+    return rows
+
+
+def test_a_named_linked_axis_is_one_condition_and_a_large_grid_folds_onto_its_axes(tmp_path: Path) -> None:
+    from peg_ctrl.experiments.report import _success_table, swept_conditions, write_report
+    from peg_ctrl.experiments.stats import episodes_frame
+
+    df = episodes_frame(_sensor_rows())
+    # The sensor is a condition (named levels); the hole noise moves with it, so it is left out.
+    assert swept_conditions(df) == [
+        "task.lateral_error",
+        "task.tilt_error",
+        "scene.friction",
+        "domain.ft_sensor",
+        "friction_scale",
+    ]
+    df["won"] = df["status"] == "success"
+    table = _success_table(df, "domain.ft_sensor")
+    assert table.attrs["labels"] == ["ideal", "forge"]
+    forge = table[(table["arm"] == "pd/spiral") & (table["x"] == 1.0)].iloc[0]
+    assert (forge["k"], forge["n"]) == (0, 8)
+    _write_csv(tmp_path, _sensor_rows())
+    report = write_report(tmp_path).read_text()
+    assert "## Success per condition" in report and "## Success per grid cell" not in report
+    # pd/spiral with the ideal sensor (even seeds): 0, 2, 4, 6 at 0.5 mm and 0 at 3 mm won;
+    # peak forces 30-36 N (median 33), contact-to-seated 2, 4, 6, 8 and 2 s (median 4).
+    lines = report.splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith("| arm | lateral_error="))
+    header, line = lines[at], next(x for x in lines[at:] if x.startswith("| pd/spiral | "))
+    cell = line.split(" | ")[header.split(" | ").index("ft_sensor=ideal")]
+    assert cell == "5/8, 33.0 N, 4.0 s", cell
+    assert (tmp_path / "success_vs_disturbance.png").stat().st_size > 10_000
 
 
 def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction() -> None:

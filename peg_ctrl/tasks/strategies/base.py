@@ -197,7 +197,8 @@ class StrategyConfig:
 
     ``task: {name: held_insertion, strategy: spiral}`` or ``strategy: {name: spiral,
     spiral_pitch: 0.001}`` picks the class from :data:`peg_ctrl.tasks.strategies.STRATEGIES`.
-    Every numeric field must be finite and > 0 unless it is listed in ``NON_NEGATIVE``.
+    Every numeric field must be finite and > 0 unless it is listed in ``NON_NEGATIVE``; a
+    field declared ``bool`` must be true or false.
     """
 
     name: ClassVar[str]
@@ -208,6 +209,10 @@ class StrategyConfig:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.type in (bool, "bool"):
+                if not isinstance(value, bool):
+                    raise ConfigError(f"task.strategy.{f.name} must be true or false, got {value!r}")
+                continue
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"task.strategy.{f.name} must be a finite number, got {value!r}")
             if f.name in self.NON_NEGATIVE:

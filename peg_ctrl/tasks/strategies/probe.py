@@ -21,19 +21,23 @@ Phases:
 - ``approach`` the datum, a point of the block's top face ``datum_offset`` beside the observed
   hole (along the diagonal towards -x, -y), the lower end ``touch_gap`` above it;
 - ``touch``: land on it (the first contact);
-- ``align``: press with ``align_force`` (more with a noisier sensor), the tilt axes
-  moment-controlled at zero about the believed lower end, so the peg turns about its tip until
-  its end lies flat; flat is a *still hand* (it turns less than ``still_angle`` over
-  ``still_time``, after ``align_min``); the mean orientation over that window is the peg's axis
-  in the hand and the task revises its belief (:meth:`HeldInsertion.recalibrate`);
+- ``rock``: the tilt of the peg in the hand, from the pose alone (:class:`RockCalibration`):
+  two more landings on the datum with the hand turned by +/- ``rock_angle`` about the pads'
+  normal (the only axis the pads let the peg turn about); the three landing heights fix the
+  tilt and the face's height (a least-squares fit); the task revises its belief of the peg's
+  axis (:meth:`HeldInsertion.revise_axis`). No moment is read: about the tip, the sensor's
+  force noise times its 0.17 m lever swamps the moment a flat-pressing end makes;
 - ``reference``: lift, land again on the datum: the face's height for the landings to come, at
   their own force;
 - ``transfer`` over the first landing point;
 - ``probe``: landings and bearing presses, as above, until the lower end is believed in the bore
   (a landing on the believed axis goes on down it);
-- ``insert``: ``relax_time`` still with the lateral axes free (the grasp unloads what the
-  landings put into it), then a jerk-limited descent at ``insert_speed`` to ``seat_margin``
-  below the seated depth, the lateral axes free (the bore guides), the orientation held;
+- ``centre``: the lower end, in the bore's mouth, pushed against its walls along +x, -x, +y,
+  -y in turn (the stops read from the pose); the bore's axis is midway between them;
+- ``insert``: ``relax_time`` still on that axis, then a jerk-limited descent at
+  ``insert_speed`` to ``seat_margin`` below the seated depth, the pose tracked on every axis (a
+  peg centred and upright in its bore touches no wall; with the lateral forces free the contact
+  MPC's accommodation taps the walls, 60 N at friction 0.9: ``insert_free`` frees them anyway);
 - ``hold`` still once the seated detection fires (depth reached, the hand at rest within the
   noise of its speed sensing), pushing no more.
 
@@ -66,6 +70,7 @@ _Vec = np.ndarray
 PRESS_AXES = (False, False, True, False, False, False)  # press along z, the pose held otherwise
 LAND_AXES = (True, True, True, False, False, False)  # press along z, lateral forces free
 SLIDE_AXES = (True, True, False, False, False, False)  # lateral forces free, z and orientation tracked
+NO_AXES = (False,) * 6  # the pose tracked on every axis
 _BEARING_ERROR = 0.3  # the model's own error on a centre-of-pressure bearing [rad]
 
 
@@ -102,12 +107,12 @@ class ProbeConfig(StrategyConfig):
     hop_speed: float = 0.05  # lateral speed of a hop
     move_accel: float = 3.0  # acceleration of the transfer and the hops
     drop_min: float = 0.00004  # a landing this far below the face is on the chamfer
-    drop_sigma: float = 0.00002  # how well a landing's depth below the face is known
+    drop_sigma: float = 0.000015  # how well a landing's depth below the face is known
     circle_reach: float = 0.00015  # a landing this near the axis (the chamfer says) circles round it
     circle_speed: float = 0.002  # ... at this speed, pressing
     press_force: float = 2.0  # the bearing press on the face
     settle_time: float = 0.03  # it is read once its push has risen to 70 % (or after press_time) ...
-    read_time: float = 0.04  # ... over this window
+    read_time: float = 0.06  # ... over this window
     press_time: float = 0.3
     probe_time: float = 6.0  # budget of the search
     wall_force: float = 3.0  # centring: the lateral push that finds each wall of the bore's mouth
@@ -115,6 +120,7 @@ class ProbeConfig(StrategyConfig):
     relax_time: float = 0.05  # on the bore's axis, still first
     insert_speed: float = 0.08  # the descent into the bore
     insert_accel: float = 2.0
+    insert_free: bool = False  # the descent leaves the lateral forces free (else the pose is tracked)
     seat_margin: float = 0.0015  # the descent aims this far below the seated depth
     insert_time: float = 2.0  # budget of the descent
     hold_time: float = 1.0  # budget of the final hold
@@ -403,9 +409,11 @@ class ProbeStrategy(Strategy):
 
     def _centring(self, obs: Observation) -> None:
         self.task.feel(obs)
+        assert self.centring is not None
         self.centring.step(obs)
 
     def _centred(self, obs: Observation) -> str | None:
+        assert self.centring is not None
         return "centred" if self.centring.centre is not None else None
 
     # -- insert and hold ----------------------------------------------------------------------------
@@ -423,7 +431,11 @@ class ProbeStrategy(Strategy):
         goal = self.tip_waypoint(tip, q)
         limits = dataclasses.replace(t.limits, v_lin=c.insert_speed, a_lin=c.insert_accel)
         t.goal = goal
-        return Guided(t.planner.plan(here, goal, limits), SLIDE_AXES, delay=c.relax_time)
+        return Guided(t.planner.plan(here, goal, limits), self._insert_axes, delay=c.relax_time)
+
+    @property
+    def _insert_axes(self) -> tuple[bool, ...]:
+        return SLIDE_AXES if self.cfg.insert_free else NO_AXES
 
     def _seated(self, obs: Observation) -> str | None:
         t = self.task
@@ -433,7 +445,12 @@ class ProbeStrategy(Strategy):
         s = obs.gripper
         return self._held(
             GripperTarget.trusted(
-                s.p_world, self.task.goal.quat_world, np.zeros(3), np.zeros(3), 0.0, wrench_axes=SLIDE_AXES
+                s.p_world,
+                self.task.goal.quat_world,
+                np.zeros(3),
+                np.zeros(3),
+                0.0,
+                wrench_axes=self._insert_axes,
             )
         )
 
@@ -598,6 +615,8 @@ class Centring:
         self.walls: list[_Vec] = []
         self.centre: _Vec | None = None
         self._start = obs.gripper.p_world.copy()
+        self._p: _Vec = self._start.copy()  # the pushes' held position
+        self._still: list[_Vec] = []
         self._push(obs)
 
     def sample(self, t: float) -> GripperTarget:
@@ -686,6 +705,7 @@ class ProbeSearch:
         self.belief = belief
         self.quat = quat
         self.landings = self.drops = self.bearings = 0
+        self._last_drop: _Vec | None = None  # where the last landing on the chamfer was
         self._trajectory: Motion | None = None
         self._reads: list[tuple[_Vec, _Vec]] = []  # (force, moment) while reading a press
         self._state = "land"
@@ -713,15 +733,24 @@ class ProbeSearch:
     def _landed(self, obs: Observation) -> None:
         """Into the belief: how far the landing sank. On the chamfer, on to its believed axis; on
         the face, a bearing press where the sensor can tell one, else the next landing."""
-        c, belief, landing = self.cfg, self.belief, self._landing
-        a = self.task.scene.assets
-        drop = self.task.z_face - landing.z
+        c, belief, landing, task = self.cfg, self.belief, self._landing, self.task
+        a = task.scene.assets
+        drop = task.z_face - landing.z
         self.landings += 1
+        if drop < c.drop_min and belief.capture_mass(landing.xy) < 1.0 - _SURE:
+            # Surely on the face: the face's height, followed (the sensor's drift moves what a
+            # landing's force presses into it).
+            task.z_face += _FACE_GAIN * (landing.z - task.z_face)
+            drop = task.z_face - landing.z
         belief.landing(landing.xy, drop, reach=a.clearance + a.chamfer, sigma=c.drop_sigma)
         if drop >= c.drop_min:
             self.drops += 1
             gap = a.clearance + a.chamfer - drop  # how far the axis is, the chamfer says
-            if gap < c.circle_reach:  # the axis is close, in some direction: circle round it
+            # Back where the last drop was: the chamfer slid the end back from the belief's peak,
+            # so the peak is on the wrong side of the ring the drops draw. Circle round it too.
+            again = self._last_drop is not None and _distance(landing.xy, self._last_drop) < c.circle_reach
+            self._last_drop = landing.xy.copy()
+            if gap < c.circle_reach or again:  # the axis is close, in some direction: circle round it
                 self._circle(obs, max(gap, a.clearance))
             else:
                 self._hop(obs, belief.peak(_PEAK_RADIUS))
@@ -824,9 +853,14 @@ class ProbeSearch:
 
 
 _WALL_SETTLE = 0.04  # a push for a wall is watched for a stop only after this long [s]
+_FACE_GAIN = 0.3  # how far a landing surely on the face moves the face's height towards its own
 _SURE = 0.9  # the belief is sure a landing point is on the chamfer above this capture mass
 _PEAK_RADIUS = 0.0002  # the belief's mode: the mean of its particles this near the likeliest [m]
-_BEARING_USEFUL = 0.002  # a bearing press is worth its time while its centre of pressure is this sure [m]
+_BEARING_USEFUL = 0.003  # a bearing press is worth its time while its centre of pressure is this sure [m]
+
+
+def _distance(a: _Vec, b: _Vec) -> float:
+    return float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
 
 
 def _angle(a: _Vec, b: _Vec) -> float:

@@ -103,6 +103,16 @@ def test_a_saved_strategy_loads_again() -> None:
         ({"name": "tilt", "tilt_angle": 0.7}, ConfigError, r"task.strategy.tilt_angle must be in \(0, 0.5\)"),
         ({"name": "align", "wiggle": 1}, ConfigError, "task.strategy.wiggle: unknown field; known: align_"),
         (3, ConfigError, "task.strategy: expected a strategy name or a mapping, got 3"),
+        (
+            {"name": "probe", "insert_free": 1},
+            ConfigError,
+            "task.strategy.insert_free: expected true or false, got 1",
+        ),
+        (
+            {"name": "probe", "land_force": True},
+            ConfigError,
+            "task.strategy.land_force: expected a number, got True",
+        ),
     ],
 )
 def test_bad_strategies_are_named(config: object, error: type[Exception], message: str) -> None:
