@@ -701,6 +701,44 @@ def _condition_section(df: Any, keys: list[str]) -> list[str]:
     return [*lines, ""]
 
 
+_UNTIMED_PHASES = ("start", "settle", "hold", "done")  # not part of getting the peg in
+
+
+def _phase_section(out_dir: Path, rows: list[dict[str, Any]]) -> list[str]:
+    """Where the time goes: per arm, the median duration of each phase over its successes (read
+    from the episodes' summary.json; left out without them)."""
+    per_arm: dict[str, dict[str, list[float]]] = {}
+    for row in rows:
+        if row.get("status") != "success" or not row.get("log_path"):
+            continue
+        path = _episode_dir(out_dir, row["log_path"]) / "summary.json"
+        if not path.is_file():
+            continue
+        phases = json.loads(path.read_text()).get("phases") or []
+        times = per_arm.setdefault(arm_of(row), {})
+        for ph in phases:
+            if ph["phase"] in _UNTIMED_PHASES or ph.get("t_end") is None:
+                continue
+            times.setdefault(ph["phase"], []).append(float(ph["t_end"]) - float(ph["t_start"]))
+    if not per_arm:
+        return []
+    lines = [
+        "## Where the time goes",
+        "",
+        "Per arm, the median time [s] each phase took over the arm's successes (in the order the "
+        "phases run; the first contact is in the first phase that touches: `touch` for probe and "
+        "align, `descend` or `push` for the others).",
+        "",
+        "| arm | successes | phases: median [s] |",
+        "|---|---|---|",
+    ]
+    for arm, times in per_arm.items():
+        n = max((len(v) for v in times.values()), default=0)
+        text = ", ".join(f"{name} {np.median(v):.2f}" for name, v in times.items())
+        lines.append(f"| {arm} | {n} | {text} |")
+    return [*lines, ""]
+
+
 def _cost_section(rows: list[dict[str, Any]]) -> list[str]:
     """Wall time of the controller per control step, and of its optimiser per solve, per arm."""
     import pandas as pd
@@ -776,6 +814,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         *_summary_section(summary),
         *_cell_section(rows),
         *_comparison_section(rows),
+        *_phase_section(out_dir, rows),
         *_cost_section(rows),
         *_plots_section(rows, plots),
     ]

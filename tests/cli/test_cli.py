@@ -117,7 +117,7 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (
             ["sweep", "nope"],
             "no shipped experiment has that name; shipped: clearance, contact, contact_hard, "
-            "contact_hard_offgrid, guarded, quick",
+            "contact_hard_offgrid, contact_real, contact_real_offgrid, guarded, quick",
         ),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
@@ -348,7 +348,16 @@ def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str])
     assert main(["sweep", "--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     names = [line.split()[0] for line in lines]
-    assert names == ["clearance", "contact", "contact_hard", "contact_hard_offgrid", "guarded", "quick"]
+    assert names == [
+        "clearance",
+        "contact",
+        "contact_hard",
+        "contact_hard_offgrid",
+        "contact_real",
+        "contact_real_offgrid",
+        "guarded",
+        "quick",
+    ]
     assert lines[5].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
 
 

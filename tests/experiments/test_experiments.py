@@ -569,6 +569,30 @@ def test_a_named_linked_axis_is_one_condition_and_a_large_grid_folds_onto_its_ax
     assert (tmp_path / "success_vs_disturbance.png").stat().st_size > 10_000
 
 
+def test_where_the_time_goes_is_the_median_phase_time_of_the_successes(tmp_path: Path) -> None:
+    import json
+
+    from peg_ctrl.experiments.report import _phase_section
+
+    rows = []
+    for i, (status, touch) in enumerate(
+        [("success", 0.2), ("success", 0.4), ("success", 0.9), ("failure", 5.0)]
+    ):
+        log = f"episodes/k{i}/log.jsonl"
+        (tmp_path / log).parent.mkdir(parents=True)
+        phases = [
+            {"phase": "settle", "t_start": 0.0, "t_end": 0.3},
+            {"phase": "touch", "t_start": 0.3, "t_end": 0.3 + touch},
+            {"phase": "insert", "t_start": 0.3 + touch, "t_end": 1.3 + touch},
+            {"phase": "hold", "t_start": 1.3 + touch, "t_end": 2.3 + touch},
+        ]
+        (tmp_path / log).parent.joinpath("summary.json").write_text(json.dumps({"phases": phases}))
+        rows.append({"arm": "mpc/probe", "controller": "mpc", "status": status, "log_path": log})
+    lines = _phase_section(tmp_path, rows)
+    assert "| mpc/probe | 3 | touch 0.40, insert 1.00 |" in lines  # settle and hold left out
+    assert _phase_section(tmp_path, [{**rows[0], "log_path": "episodes/gone/log.jsonl"}]) == []
+
+
 def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction() -> None:
     exp = load_experiment(CONFIGS / "contact_hard.yaml")
     jobs = expand(exp)
