@@ -358,7 +358,7 @@ def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str])
         "guarded",
         "quick",
     ]
-    assert lines[5].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
+    assert lines[7].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
 
 
 def test_sweep_resolves_a_shipped_name_unless_a_file_exists(
