@@ -271,7 +271,9 @@ def train(settings: PPOSettings, out: str | Path, *, show_progress: bool = True)
     )
     curve: list[Evaluation] = []
     t0 = time.perf_counter()
-    with progress_bar(total=settings.timesteps, desc="PPO", unit="step", enabled=show_progress) as bar:
+    with progress_bar(
+        total=settings.timesteps, desc="PPO", unit="step", enabled=show_progress, lines="steps"
+    ) as bar:
         callback = _callback(settings, curve, t0, bar)
         model.learn(total_timesteps=settings.timesteps, callback=callback)
         if not curve or curve[-1].timesteps != model.num_timesteps:  # PPO ends on a whole rollout

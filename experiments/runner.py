@@ -33,7 +33,17 @@ from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_
 from peg_ctrl.run.episode import COST_FIELDS
 from peg_ctrl.run.workers import worker_pool
 
-__all__ = ["run_sweep", "collect_rows", "refresh_tables", "bench_sweep", "EPISODE_COLUMNS", "BACKENDS"]
+__all__ = [
+    "run_sweep",
+    "collect_rows",
+    "refresh_tables",
+    "bench_sweep",
+    "finished_summaries",
+    "check_same_experiment",
+    "experiment_text",
+    "EPISODE_COLUMNS",
+    "BACKENDS",
+]
 
 # episodes.csv columns copied from each episode's summary.json.
 _SUMMARY_COLUMNS = (
@@ -133,21 +143,61 @@ def bench_sweep(n_episodes: int = 6, *, workers: tuple[int, ...] = (1, 2)) -> di
     }
 
 
-def _done(out: Path) -> bool:
-    """Whether the episode in ``out`` finished: its final summary is there. The first summary,
+def _finished(out: Path) -> dict[str, Any] | None:
+    """The summary of the episode in ``out`` if it finished, else None. The first summary,
     written the moment the episode ends, still points at ``forces.partial``; the final one,
     written once the trace and states are packed, at ``forces.npz``. An episode killed in
     between runs again."""
     path = out / "summary.json"
     if not path.is_file():
-        return False
+        return None
     try:
         summary = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError):
-        return False
-    return summary.get("status") in ("success", "failure") and not str(
+        return None
+    if not isinstance(summary, dict):
+        return None
+    finished = summary.get("status") in ("success", "failure") and not str(
         summary.get("trace_path", "")
     ).endswith(".partial")
+    return summary if finished else None
+
+
+def _done(out: Path) -> bool:
+    """Whether the episode in ``out`` finished: its final summary is there (see :func:`_finished`)."""
+    return _finished(out) is not None
+
+
+def finished_summaries(out_dir: Path) -> dict[str, dict[str, Any]]:
+    """The finished episodes in ``out_dir/episodes``: key -> ``summary.json``; empty when there
+    are none (or no ``out_dir``). Nothing is written."""
+    root = Path(out_dir) / "episodes"
+    if not root.is_dir():
+        return {}
+    found = {}
+    for path in sorted(root.iterdir()):
+        summary = _finished(path) if path.is_dir() else None
+        if summary is not None:
+            found[path.name] = summary
+    return found
+
+
+def experiment_text(exp: ExperimentConfig) -> str:
+    """The resolved experiment as the sweep saves it in ``experiment.json``."""
+    return to_json(to_dict(exp), indent=2, sort_keys=True) + "\n"
+
+
+def check_same_experiment(out_dir: Path, exp: ExperimentConfig) -> None:
+    """Refuse an ``out_dir`` that holds the results of another experiment.
+
+    Raises:
+        ConfigError: ``out_dir/experiment.json`` exists and is not ``exp``'s.
+    """
+    saved = Path(out_dir) / "experiment.json"
+    if saved.is_file() and saved.read_text() != experiment_text(exp):
+        raise ConfigError(
+            f"{out_dir} holds results of a different experiment; use another --out or delete it"
+        )
 
 
 # A backend's results as they finish; closed early, it stops its work.
@@ -233,33 +283,36 @@ def _sweep(
     """:func:`run_sweep` in the locked ``out_dir``."""
     from peg_ctrl.progress import progress_bar
 
-    saved = out_dir / "experiment.json"
-    resolved = to_json(to_dict(exp), indent=2, sort_keys=True) + "\n"
-    if saved.is_file() and saved.read_text() != resolved:
-        raise ConfigError(
-            f"{out_dir} holds results of a different experiment; use another --out or delete it"
-        )
-    atomic_write_text(saved, resolved)
-    tasks = [
-        (job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key))
-        for job in jobs
-        if not _done(out_dir / "episodes" / job.key)
-    ]
+    check_same_experiment(out_dir, exp)
+    atomic_write_text(out_dir / "experiment.json", experiment_text(exp))
+    tasks = []
+    wins = 0  # of the episodes done, before and now
+    for job in jobs:
+        summary = _finished(out_dir / "episodes" / job.key)
+        if summary is None:
+            tasks.append((job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key)))
+        else:
+            wins += summary["status"] == "success"
     done_before = len(jobs) - len(tasks)
     started = time.perf_counter()
     try:
         with progress_bar(
-            total=len(jobs), initial=done_before, desc=exp.name, unit="ep", enabled=progress
+            total=len(jobs),
+            initial=done_before,
+            desc=f"sweep {exp.name}",
+            unit="ep",
+            enabled=progress,
+            lines="episodes",
+            postfix=f"{wins} inserted",
         ) as bar:
-            successes = 0
             runner = BACKENDS[backend]
             stream = runner(tasks, workers, address) if backend == "ray" else runner(tasks, workers)
             # closing(): an exception here reaches the backend now (it ends its workers), not
             # whenever the suspended generator is collected.
             with contextlib.closing(stream):
                 for result in stream:
-                    successes += result["status"] == "success"
-                    bar.set_postfix(success=f"{successes}/{bar.n + 1 - done_before}", refresh=False)
+                    wins += result["status"] == "success"
+                    bar.set_postfix_str(f"{wins} inserted", refresh=False)
                     bar.update(1)
     finally:
         # Whatever stopped the sweep (Ctrl-C, a crashed worker), the finished episodes' tables

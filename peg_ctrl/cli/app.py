@@ -71,8 +71,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="peg-sim",
         description="Peg-in-hole simulation and controller research in MuJoCo. "
         "'peg-sim COMMAND --help' describes a command.",
-        epilog=f"Progress bars go to stderr when it is a terminal; {ENV_VAR}=0 hides them, "
-        f"{ENV_VAR}=1 shows them anyway.",
+        epilog="Progress goes to stderr: a bar on a terminal; otherwise long commands (sweep, validity, "
+        f"validate-profile, bench) print a plain line about every 10 s. {ENV_VAR}=0 hides both, "
+        f"{ENV_VAR}=1 draws the bars anyway.",
     )
     parser.add_argument("--version", action="version", version=f"peg-sim {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -54,11 +54,13 @@ def run_batch(
     with worker_pool(min(workers or default_workers(), len(items))) as pool:
         pending = {pool.submit(_worker, item): i for i, item in enumerate(items)}
         successes = 0
-        with progress_bar(total=len(items), desc=desc, unit="ep", enabled=progress) as bar:
+        with progress_bar(
+            total=len(items), desc=desc, unit="ep", enabled=progress, lines="episodes", postfix="0 inserted"
+        ) as bar:
             for fut in futures.as_completed(pending):
                 i = pending[fut]
                 results[i] = fut.result()
                 successes += results[i]["status"] == "success"  # type: ignore[index]
+                bar.set_postfix_str(f"{successes} inserted", refresh=False)
                 bar.update(1)
-                bar.set_postfix(success=f"{successes}/{bar.n}")
     return [r for r in results if r is not None]

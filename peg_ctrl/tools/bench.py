@@ -274,7 +274,8 @@ def bench_profiles(
     states: dict[tuple[str, str], tuple[mujoco.MjModel, mujoco.MjData]] = {}
     pushes = list(itertools.product(profiles, _CONTACT_SITUATIONS.items()))
     # held_push rejects an unknown profile name before any work
-    for name, (situation, fields) in with_bar(pushes, desc="held pushes", unit="push", enabled=progress):
+    shown = with_bar(pushes, desc="held pushes", unit="push", enabled=progress, lines="pushes")
+    for name, (situation, fields) in shown:
 
         def keep(m: mujoco.MjModel, d: mujoco.MjData, key: tuple[str, str] = (name, situation)) -> None:
             states[key] = (m, copy.copy(d))
@@ -335,7 +336,9 @@ def run_benchmarks(
 
     cases = [(t, c, dt) for t in tasks for c in controllers for dt in control_dts or [None]]
     entries = []
-    with progress_bar(total=len(cases) * repeats, desc="bench", unit="rep", enabled=progress) as bar:
+    with progress_bar(
+        total=len(cases) * repeats, desc="bench", unit="rep", enabled=progress, lines="repetitions"
+    ) as bar:
         for t, c, dt in cases:
             bar.set_postfix_str(f"{c} / {t}")
             entries.append(

@@ -53,7 +53,7 @@ def run_battery(
         "profiles": {},
     }
     study: dict[str, list[Trial]] = {}
-    with progress_bar(total=total, desc="validity", unit="push", enabled=progress) as bar:
+    with progress_bar(total=total, desc="validity", unit="push", enabled=progress, lines="pushes") as bar:
         for name in profiles:
             bar.set_postfix_str(name)
 
