@@ -59,6 +59,8 @@ __all__ = [
     "Job",
     "load_experiment",
     "expand",
+    "arms",
+    "episode_count",
     "episode_key",
     "cells",
     "apply_experiment_overrides",
@@ -340,37 +342,58 @@ def _episode(
     )
 
 
-def expand(exp: ExperimentConfig) -> list[Job]:
-    """Every episode of the experiment, in a fixed order (controller, strategy, planner,
-    clearance, grid cell, seed)."""
-    jobs = []
+def _arms(exp: ExperimentConfig) -> list[tuple[ControllerConfig, str, StrategyConfig | None]]:
+    """Each controller with its label and each strategy it meets (None: the task's own)."""
+    found: list[tuple[ControllerConfig, str, StrategyConfig | None]] = []
     for spec in exp.controllers:
         label = _controller_label(spec, exp.controllers)
         strategies: tuple[StrategyConfig | None, ...] = (
             exp.strategies_for(label) if exp.strategies else (None,)
         )
-        for strategy in strategies:
-            for planner in exp.planners:
-                for clearance in exp.clearances:
-                    base = _episode(exp, spec, strategy, planner, clearance)
-                    name = strategy_name(base.task)
-                    for cell in cells(exp):
-                        cell_cfg = _apply_cell(base, cell)
-                        for seed in exp.seeds:
-                            cfg = dataclasses.replace(cell_cfg, seed=seed)
-                            jobs.append(
-                                Job(
-                                    episode_key(cfg),
-                                    spec.name,
-                                    label,
-                                    planner,
-                                    clearance,
-                                    seed,
-                                    cfg,
-                                    name,
-                                    cell,
-                                )
+        found.extend((spec, label, strategy) for strategy in strategies)
+    return found
+
+
+def arms(exp: ExperimentConfig) -> list[tuple[str, str]]:
+    """What the sweep compares, in job order: (:attr:`Job.arm`, the controller's name)."""
+    own = strategy_name(exp.task)
+    return [
+        (f"{label}/{name}" if (name := strategy.name if strategy else own) else label, spec.name)
+        for spec, label, strategy in _arms(exp)
+    ]
+
+
+def episode_count(exp: ExperimentConfig) -> int:
+    """How many episodes :func:`expand` makes, counted without making them."""
+    return len(_arms(exp)) * len(exp.planners) * len(exp.clearances) * len(cells(exp)) * len(exp.seeds)
+
+
+def expand(exp: ExperimentConfig) -> list[Job]:
+    """Every episode of the experiment, in a fixed order (controller, strategy, planner,
+    clearance, grid cell, seed)."""
+    jobs = []
+    for spec, label, strategy in _arms(exp):
+        for planner in exp.planners:
+            for clearance in exp.clearances:
+                base = _episode(exp, spec, strategy, planner, clearance)
+                name = strategy_name(base.task)
+                for cell in cells(exp):
+                    cell_cfg = _apply_cell(base, cell)
+                    for seed in exp.seeds:
+                        cfg = dataclasses.replace(cell_cfg, seed=seed)
+                        jobs.append(
+                            Job(
+                                episode_key(cfg),
+                                spec.name,
+                                label,
+                                planner,
+                                clearance,
+                                seed,
+                                cfg,
+                                name,
+                                cell,
                             )
+                        )
     if len({j.key for j in jobs}) != len(jobs):
         raise ConfigError("the experiment lists the same episode twice (repeated controllers or clearances?)")
     return jobs

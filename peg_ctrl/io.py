@@ -30,6 +30,7 @@ from peg_ctrl.errors import OutputError, OutputInUse
 
 __all__ = [
     "remove_stale_temps",
+    "check_output_dir",
     "prepare_output_dir",
     "prepare_output_file",
     "atomic_write_text",
@@ -80,6 +81,21 @@ def _first_non_directory(path: Path) -> Path | None:
     return None
 
 
+def check_output_dir(path: str | os.PathLike[str]) -> Path:
+    """Check, creating nothing, that no file stands where directory ``path`` (or one of its
+    parents) would be.
+
+    Raises:
+        OutputError: as :func:`prepare_output_dir` does for such a file.
+    """
+    directory = Path(path)
+    blocker = _first_non_directory(directory)
+    if blocker is not None:
+        where = "" if blocker == directory else f" (its parent {str(blocker)!r} is a file)"
+        raise OutputError(f"output directory {str(directory)!r} is not a directory{where}")
+    return directory
+
+
 def prepare_output_dir(path: str | os.PathLike[str]) -> Path:
     """Create directory ``path`` (with its parents) and check that files can be written in it.
 
@@ -92,11 +108,7 @@ def prepare_output_dir(path: str | os.PathLike[str]) -> Path:
     Raises:
         OutputError: ``path`` exists and is not a directory, cannot be created, or is not writable.
     """
-    directory = Path(path)
-    blocker = _first_non_directory(directory)
-    if blocker is not None:
-        where = "" if blocker == directory else f" (its parent {str(blocker)!r} is a file)"
-        raise OutputError(f"output directory {str(directory)!r} is not a directory{where}")
+    directory = check_output_dir(path)
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -119,6 +119,17 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
             "no shipped experiment has that name; shipped: clearance, contact, contact_hard, "
             "contact_hard_offgrid, contact_real, contact_real_offgrid, guarded, quick",
         ),
+        (["sweep", "quick", "--workers", "0"], "--workers must be >= 1, got 0"),
+        (["sweep", "quick", "--dry-run", "--workers", "-1"], "--workers must be >= 1, got -1"),
+        (["sweep", "quick", "--workers", "two"], "argument --workers: invalid int value: 'two'"),
+        (["sweep", "nope", "--dry-run"], "no shipped experiment has that name"),
+        (["sweep", "quick", "--dry-run", "--set", "seeds=0"], "seeds: must be >= 1, got 0"),
+        (["sweep", "quick", "--set", "seeds=20001"], "sweep quick: 100,005 episodes, estimated "),
+        (
+            ["sweep", "quick", "--set", "seeds=20001"],
+            "more than 20,000 episodes or 24 h; pass --yes to run it anyway (or --dry-run to see the "
+            "breakdown)",
+        ),
         (["teleop", "--speed", "9"], "--speed must be in [0.1, 5.0]"),
         (
             ["teleop", "--scripted", "--controller", "nope"],
@@ -153,7 +164,9 @@ def test_user_errors_are_one_line_with_exit_2(argv, message, tmp_path: Path) -> 
     assert list(tmp_path.iterdir()) == [], "bad input must be rejected before any output is created"
 
 
-@pytest.mark.parametrize("command", ["run", "model", "teleop --scripted", "sweep quick"])
+@pytest.mark.parametrize(
+    "command", ["run", "model", "teleop --scripted", "sweep quick", "sweep quick --dry-run"]
+)
 def test_out_that_is_a_regular_file_is_one_line_with_exit_2(command: str, tmp_path: Path) -> None:
     target = tmp_path / "results"
     target.write_text("not a directory")
