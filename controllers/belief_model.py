@@ -51,6 +51,10 @@ class BeliefModelSpec:
     kv: tuple[float, ...]
     damping: tuple[float, ...]
     parts: int = 24
+    # The hole's parts end this far outside the mouth, the rest of the block is four slabs
+    # (AssetParams.hole_ring): a rollout's landing on the face touches one slab, not a fan of
+    # parts. None: the parts reach the block's walls.
+    ring_wall: float | None = 0.003
 
 
 def _hand_inertia(model: mujoco.MjModel, tip_body: NDArray[np.float64]) -> tuple[float, float]:
@@ -117,6 +121,9 @@ def _add_block(s: mujoco.MjSpec, belief: Belief, spec: BeliefModelSpec) -> list[
         chamfer=belief.chamfer,
         contact_margin=0.0,
     )
+    if spec.ring_wall is not None:
+        mouth = params.hole_circumradius + params.chamfer / np.cos(np.pi / params.n_parts)
+        params = dataclasses.replace(params, hole_ring=mouth + spec.ring_wall)
     block = s.worldbody.add_body()
     block.name = "block"
     block.pos = [belief.hole_xy[0], belief.hole_xy[1], belief.face_z - 0.5 * belief.block_size[2]]

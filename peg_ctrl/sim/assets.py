@@ -10,6 +10,11 @@ corners). The solid around it is split into
 hole polygon, the two rays from the hole axis through that edge's end points, and the outer
 walls of the block. These parts tile the block exactly and never overlap the hole.
 
+With ``hole_ring`` set, the parts stop at a square of that half-width around the hole and the
+rest of the block is four slabs (the seed's parts run to the block's walls). A part's
+collision cost grows with its size near the peg, and a peg resting on the face away from the
+hole then touches one slab instead of a fan of parts.
+
 An optional chamfer widens the hole mouth: the top ``chamfer`` metres of each inner face are
 cut by a plane at 45 degrees, which keeps every part convex (a convex prism intersected with a
 half-space).
@@ -68,6 +73,9 @@ class AssetParams:
     chamfer: float = 0.0  # depth and width of the 45-degree chamfer at the hole mouth [m]
     contact_margin: float = 0.001  # contact margin of the block geoms, added to the hole [m]
     peg_segments: int = 32  # sides of the polygonal peg cross-section
+    # Half-width of the square around the hole axis at which the hole's parts end; beyond it
+    # the block is four slabs. None: the parts reach the block's walls (SPEC).
+    hole_ring: float | None = None
 
     def __post_init__(self) -> None:
         _check_positive("peg_radius", self.peg_radius)
@@ -100,6 +108,12 @@ class AssetParams:
                 f"hole (circumradius {hole_outer:.4f} m incl. chamfer) does not fit in the block "
                 f"(half width {half_min:.4f} m); enlarge block_size or shrink peg_radius/clearance"
             )
+        ring = self.hole_ring
+        if ring is not None and not (np.isfinite(ring) and hole_outer < ring < half_min):
+            raise ValueError(
+                f"hole_ring must be between the hole's mouth ({hole_outer:.4f} m) and the block's "
+                f"half width ({half_min:.4f} m), got {ring!r}"
+            )
 
     @property
     def hole_inradius(self) -> float:
@@ -111,9 +125,22 @@ class AssetParams:
         """Distance from the hole axis to the hole polygon's corners [m]."""
         return self.hole_inradius / float(np.cos(np.pi / self.n_parts))
 
+    @property
+    def part_count(self) -> int:
+        """Collision parts of the block: one per hole side, and four slabs with a ``hole_ring``."""
+        return self.n_parts + (4 if self.hole_ring is not None else 0)
+
+    def fields(self) -> dict[str, object]:
+        """The parameters as a mapping; an unset ``hole_ring`` is left out, so the seed's asset
+        sets (and their keys) are those from before the ring existed."""
+        out = dataclasses.asdict(self)
+        if out["hole_ring"] is None:
+            del out["hole_ring"]
+        return out
+
     def key(self) -> str:
         """A short stable hash of the parameters, used to name cached asset sets."""
-        blob = json.dumps(dataclasses.asdict(self), sort_keys=True).encode()
+        blob = json.dumps(self.fields(), sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:12]
 
 
@@ -174,7 +201,10 @@ def _part_outline(params: AssetParams, i: int) -> tuple[NDArray[np.float64], int
     Returns the outline and the number of points (2) that lie on the hole polygon.
     """
     n = params.n_parts
-    hx, hy = 0.5 * params.block_size[0], 0.5 * params.block_size[1]
+    if params.hole_ring is None:
+        hx, hy = 0.5 * params.block_size[0], 0.5 * params.block_size[1]
+    else:
+        hx = hy = params.hole_ring
     a0 = 2.0 * np.pi * i / n
     a1 = 2.0 * np.pi * (i + 1) / n
     d0 = np.array([np.cos(a0), np.sin(a0)])
@@ -196,8 +226,28 @@ def _part_outline(params: AssetParams, i: int) -> tuple[NDArray[np.float64], int
 
 
 def block_parts(params: AssetParams) -> list[Mesh]:
-    """The ``n_parts`` convex collision parts, in the block frame (origin at the block centre)."""
+    """The block's convex collision parts (:attr:`AssetParams.part_count`), in the block frame
+    (origin at the block centre): the ``n_parts`` around the hole, then the slabs of a
+    ``hole_ring``."""
     hz = 0.5 * params.block_size[2]
+    parts = _hole_parts(params, hz)
+    if params.hole_ring is not None:
+        parts.extend(_prism(outline, -hz, hz) for outline in _slab_outlines(params))
+    return parts
+
+
+def _slab_outlines(params: AssetParams) -> list[NDArray[np.float64]]:
+    """CCW outlines of the four slabs between the ring's square and the block's walls: two
+    across the whole block in x (the y > a and y < -a sides), two between them."""
+    assert params.hole_ring is not None
+    a = params.hole_ring
+    hx, hy = 0.5 * params.block_size[0], 0.5 * params.block_size[1]
+    boxes = ((-hx, a, hx, hy), (-hx, -hy, hx, -a), (a, -a, hx, a), (-hx, -a, -a, a))
+    return [np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], dtype=np.float64) for x0, y0, x1, y1 in boxes]
+
+
+def _hole_parts(params: AssetParams, hz: float) -> list[Mesh]:
+    """The ``n_parts`` parts around the hole, each bounded by one side of the hole polygon."""
     parts = []
     for i in range(params.n_parts):
         outline, _ = _part_outline(params, i)
@@ -275,9 +325,16 @@ def block_visual(params: AssetParams) -> Mesh:
             or abs(abs(centroid[2]) - hz) < 1e-9
         )
         # Radial cut planes contain the z-axis: their normal is horizontal and perpendicular
-        # to the centroid's horizontal direction.
+        # to the centroid's horizontal direction. With a ring, the square between the hole's
+        # parts and the slabs is a cut too.
         radial_dir = centroid[:2] / max(np.linalg.norm(centroid[:2]), 1e-12)
         is_cut = abs(normal[2]) < 1e-9 and abs(np.dot(normal[:2], radial_dir)) < 1e-9
+        if params.hole_ring is not None and abs(normal[2]) < 1e-9:
+            a = params.hole_ring
+            on_square = (abs(abs(centroid[0]) - a) < 1e-9 and abs(centroid[1]) <= a + 1e-9) or (
+                abs(abs(centroid[1]) - a) < 1e-9 and abs(centroid[0]) <= hx + 1e-9
+            )
+            is_cut = is_cut or on_square
         if is_cut and not on_outer:
             keep[f_idx] = False
     faces = faces[keep]
@@ -350,11 +407,11 @@ def cache_dir() -> Path:
 
 
 def _mesh_names(params: AssetParams) -> list[str]:
-    return ["peg", "block_visual", *(part_name(i) for i in range(params.n_parts))]
+    return ["peg", "block_visual", *(part_name(i) for i in range(params.part_count))]
 
 
 def _params_json(params: AssetParams) -> str:
-    return to_json(dataclasses.asdict(params), indent=2, sort_keys=True) + "\n"
+    return to_json(params.fields(), indent=2, sort_keys=True) + "\n"
 
 
 def _is_complete(directory: Path, params: AssetParams) -> bool:

@@ -10,9 +10,14 @@
     (docs/physics.md has the measurements behind each value):
 
     - the peg is a primitive cylinder, exact to the collider's tolerance;
-    - the hole is a polygon with as many sides as it takes to stay within
-      ``hole_roundness`` (10 µm) of the nominal radius: flats at the nominal radius, corners at
-      most 10 µm outside it;
+    - the hole is a polygon with its flats at the nominal radius and as many sides as it takes
+      for the peg to move in it as in a round hole, to within ``hole_play_tolerance`` (5 µm):
+      a round peg touches the flats, so its axis is free in the same polygon shrunk by the
+      peg's radius, whose corners stand ``play * (sec(pi/n) - 1)`` beyond a circle (``play``:
+      clearance plus chamfer, the reach at the mouth's outer edge). At least 24 sides, so the
+      face around the mouth a peg end rests on is within 0.6 % of a round mouth's;
+    - the hole's parts stop 3 mm outside the mouth (``hole_ring_wall``); the rest of the block
+      is four slabs;
     - the peg's contacts with the block and the table are explicit pairs with no margin (they
       act when the surfaces meet), a time constant of two physics steps and impedance
       0.99..0.999, so 10 N of steady contact penetrates a few µm;
@@ -64,8 +69,11 @@ __all__ = [
     "PRECISION",
     "FAST",
     "profile",
-    "parts_for_roundness",
+    "parts_for_play",
+    "MIN_HOLE_SIDES",
 ]
+
+MIN_HOLE_SIDES = 24  # a round mouth's outline within 0.6 % of its area (n tan(pi/n) / pi - 1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,9 +101,13 @@ class PhysicsProfile:
     noslip_iterations: int
     impratio: float
     peg_geom: str  # "mesh" (the 32-sided prism of the seed) or "cylinder" (primitive)
-    hole_roundness: float | None  # max corner deviation from the nominal radius [m]; None: n_parts
+    # The hole's sides: None keeps the assets' n_parts; else as many as keep a round peg's play
+    # within this of a round hole's [m] (parts_for_play).
+    hole_play_tolerance: float | None
     contact_margin: float | None  # block geoms' margin, added to the hole [m]; None: the assets'
     pair: PegContactParams | None = None
+    hole_ring_wall: float | None = None  # the hole's parts end this far outside the mouth [m];
+    # the rest of the block is slabs. None: the parts reach the block's walls.
     ccd_tolerance: float | None = None  # convex collision (GJK/EPA) tolerance [m]; None: MuJoCo's
     ccd_iterations: int | None = None  # ... and iteration cap; None: MuJoCo's
     # A peg-block contact deeper than this [m] is a collider artifact, not physics: MuJoCo 4.0's
@@ -113,10 +125,13 @@ class PhysicsProfile:
         """The geometry this profile builds for the requested ``params``: its margin, its hole."""
         if self.contact_margin is not None:
             params = dataclasses.replace(params, contact_margin=self.contact_margin)
-        if self.hole_roundness is None:
-            return params
-        n = parts_for_roundness(params.hole_inradius, self.hole_roundness)
-        return dataclasses.replace(params, n_parts=n)
+        if self.hole_play_tolerance is not None:
+            play = abs(params.hole_inradius - params.peg_radius) + params.chamfer
+            params = dataclasses.replace(params, n_parts=parts_for_play(play, self.hole_play_tolerance))
+        if self.hole_ring_wall is not None:
+            mouth = params.hole_circumradius + params.chamfer / math.cos(math.pi / params.n_parts)
+            params = dataclasses.replace(params, hole_ring=mouth + self.hole_ring_wall)
+        return params
 
     def apply_options(self, opt: mujoco.MjOption) -> None:
         opt.timestep = self.timestep
@@ -134,16 +149,21 @@ class PhysicsProfile:
             opt.ccd_iterations = self.ccd_iterations
 
 
-def parts_for_roundness(inradius: float, tolerance: float) -> int:
-    """Fewest polygon sides whose corners lie within ``tolerance`` [m] outside the ``inradius``."""
+def parts_for_play(play: float, tolerance: float, minimum: int = MIN_HOLE_SIDES) -> int:
+    """Fewest polygon sides (at least ``minimum``) for which a round peg with ``play`` [m] of
+    lateral freedom moves within ``tolerance`` [m] of how it would in a round hole.
+
+    The peg touches the flats, so its axis is confined to the hole polygon shrunk by its radius:
+    a polygon of inradius ``play`` whose corners lie ``play * (sec(pi/n) - 1)`` beyond the circle.
+    """
     if not (math.isfinite(tolerance) and tolerance > 0.0):
-        raise ConfigError(f"hole roundness tolerance must be > 0 m, got {tolerance!r}")
-    if not (math.isfinite(inradius) and inradius > 0.0):
-        raise ConfigError(f"hole inradius must be > 0 m, got {inradius!r}")
-    n = math.ceil(math.pi / math.acos(inradius / (inradius + tolerance)))
-    while inradius / math.cos(math.pi / n) - inradius > tolerance:  # guard the rounding
+        raise ConfigError(f"hole play tolerance must be > 0 m, got {tolerance!r}")
+    if not (math.isfinite(play) and play >= 0.0):
+        raise ConfigError(f"play must be >= 0 m, got {play!r}")
+    n = minimum
+    while play * (1.0 / math.cos(math.pi / n) - 1.0) > tolerance:
         n += 1
-    return max(n, 4)
+    return n
 
 
 SEED = PhysicsProfile(
@@ -157,7 +177,7 @@ SEED = PhysicsProfile(
     noslip_iterations=20,
     impratio=10.0,
     peg_geom="mesh",
-    hole_roundness=None,
+    hole_play_tolerance=None,
     contact_margin=None,
 )
 
@@ -172,7 +192,8 @@ PRECISION = PhysicsProfile(
     noslip_iterations=0,
     impratio=100.0,
     peg_geom="cylinder",
-    hole_roundness=10e-6,
+    hole_play_tolerance=5e-6,
+    hole_ring_wall=0.003,
     contact_margin=0.0,
     pair=PegContactParams(),
     ccd_tolerance=1e-9,

@@ -186,7 +186,7 @@ def _add_block(
     visual.density = 0.0
     visual.rgba = [0.55, 0.42, 0.30, 1.0]
     parts = []
-    for i in range(assets.n_parts):
+    for i in range(assets.part_count):
         name = part_name(i)
         parts.append(name)
         _add_mesh(spec, name, files[name])
@@ -595,8 +595,14 @@ def check_scene(name: str | PhysicsProfile, scene: SceneConfig) -> None:
             f"scene.assets.contact_margin: set by physics.profile={prof.name} "
             f"({prof.contact_margin} m); leave it out or use physics.profile=seed"
         )
-    if prof.hole_roundness is not None and assets.n_parts != default.n_parts:
+    if prof.hole_play_tolerance is not None and assets.n_parts != default.n_parts:
         raise ConfigError(
-            f"scene.assets.n_parts: set by physics.profile={prof.name} (round to "
-            f"{prof.hole_roundness * 1e6:g} um); leave it out or use physics.profile=seed"
+            f"scene.assets.n_parts: set by physics.profile={prof.name} (a round peg's play within "
+            f"{prof.hole_play_tolerance * 1e6:g} um of a round hole's); leave it out or use "
+            "physics.profile=seed"
+        )
+    if prof.hole_ring_wall is not None and assets.hole_ring is not None:
+        raise ConfigError(
+            f"scene.assets.hole_ring: set by physics.profile={prof.name}; leave it out or use "
+            "physics.profile=seed"
         )

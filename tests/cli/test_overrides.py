@@ -140,11 +140,11 @@ def exported(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
 
 
 def test_exported_model_is_the_precision_scene(exported: mujoco.MjModel) -> None:
-    from peg_ctrl.sim.physics import parts_for_roundness
+    from peg_ctrl.sim.physics import parts_for_play
 
     assert exported.opt.timestep == 0.0005
     parts = [g for g in range(exported.ngeom) if exported.geom(g).name.startswith("object_")]
-    assert len(parts) == parts_for_roundness(0.010 + 5e-5, 10e-6)
+    assert len(parts) == parts_for_play(5e-5, 5e-6) + 4  # the hole's sides and the ring's slabs
     assert exported.npair == len(parts) + 1  # each block part and the table
 
 

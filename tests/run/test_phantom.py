@@ -4,6 +4,8 @@ multiccd (``peg_ctrl.run.loop.PhantomGuard``), and a step without a phantom is t
 
 from __future__ import annotations
 
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
@@ -17,7 +19,9 @@ PHANTOM_SEEN_IN = "4.0.0"  # the MuJoCo release whose collider returns the phant
 
 # A diffik episode's state (align strategy, friction 0.3, seed 1), one step before its collider
 # returned a 9.5 mm phantom contact and its solver a 1768 N force: the peg's end lies flat on the
-# datum, across several of the block's parts.
+# datum, across several of the block's parts. That was the precision block of 71 wedge-shaped
+# parts reaching the block's walls; today's puts the datum on one slab (AssetParams.hole_ring),
+# where the collider returns no phantom at this state, so the guard is tested on the old block.
 QPOS = [
     0.17760205753350183,
     -0.02148048180820112,
@@ -75,10 +79,32 @@ CTRL = [
 ]
 
 
+# The precision profile with the block it had then: 71 parts to the walls, no slabs.
+WEDGES = dataclasses.replace(PRECISION, name="precision-71", hole_play_tolerance=None, hole_ring_wall=None)
+
+
 @pytest.fixture(scope="module")
 def model() -> mujoco.MjModel:
+    scene = SceneConfig(assets=AssetParams(clearance=5e-5, chamfer=0.001, n_parts=71), friction=0.3)
+    return build_model(scene, WEDGES)
+
+
+def test_todays_block_puts_that_datum_on_a_slab_without_a_phantom() -> None:
     scene = SceneConfig(assets=AssetParams(clearance=5e-5, chamfer=0.001), friction=0.3)
-    return build_model(scene, "precision")
+    today = build_model(scene, "precision")
+    data = _at_the_state(today)
+    mujoco.mj_forward(today, data)
+    peg, block = today.body("peg").id, today.body("block").id
+    parts = [today.geom(g).name for g in range(today.ngeom) if today.geom_bodyid[g] == block]
+    slabs = set(parts[-4:])  # the block's last four collision parts
+    touched = {
+        today.geom(int(g)).name
+        for c in data.contact[: data.ncon]
+        for g in (c.geom1, c.geom2)
+        if today.geom_bodyid[g] == block and peg in (today.geom_bodyid[c.geom1], today.geom_bodyid[c.geom2])
+    }
+    assert touched and touched <= slabs
+    assert -_deepest_peg_block(today, data) < 1e-6
 
 
 def _at_the_state(model: mujoco.MjModel) -> mujoco.MjData:

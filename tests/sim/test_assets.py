@@ -29,6 +29,7 @@ PARAMS = [
     AssetParams(),
     AssetParams(clearance=0.0002, chamfer=0.002),
     AssetParams(n_parts=6, clearance=0.004),
+    AssetParams(n_parts=33, clearance=5e-5, chamfer=0.001, contact_margin=0.0, hole_ring=0.0141),
 ]
 
 
@@ -124,10 +125,10 @@ def test_default_has_ten_parts() -> None:
     assert len(block_parts(AssetParams())) == 10
 
 
-@pytest.mark.parametrize("params", PARAMS, ids=["default", "tight-chamfer", "six-parts"])
+@pytest.mark.parametrize("params", PARAMS, ids=["default", "tight-chamfer", "six-parts", "ring"])
 def test_parts_are_convex_and_tile_the_block_without_the_hole(params: AssetParams) -> None:
     parts = block_parts(params)
-    assert len(parts) == params.n_parts
+    assert len(parts) == params.part_count
     for part in parts:
         hull = ConvexHull(part.vertices)
         assert part.volume() == pytest.approx(hull.volume, rel=1e-9)  # convex
@@ -206,6 +207,8 @@ def test_measured_clearance_between_peg_and_hole(clearance: float) -> None:
         ({"n_parts": 3}, "n_parts"),
         ({"block_size": (0.025, 0.08, 0.05)}, "hole"),
         ({"chamfer": float("nan")}, "chamfer"),
+        ({"hole_ring": 0.011}, "hole_ring"),
+        ({"hole_ring": 0.05}, "hole_ring"),
     ],
 )
 def test_bad_parameters_name_the_field(kwargs: dict, field: str) -> None:

@@ -12,13 +12,13 @@ import pytest
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.run.episode import EpisodeConfig
 from peg_ctrl.sim.assets import AssetParams
-from peg_ctrl.sim.physics import PRECISION, PhysicsConfig, parts_for_roundness
+from peg_ctrl.sim.physics import MIN_HOLE_SIDES, PRECISION, PhysicsConfig, parts_for_play
 from peg_ctrl.sim.scene import SceneConfig, build_model, check_scene
 
 PEG_RADIUS = 0.010  # [m], AssetParams default
 PEG_HALF_LENGTH = 0.05  # [m], half the default 0.1 m peg
 CLEARANCE = 0.0001  # [m], the precision model's clearance in this file
-ROUNDNESS = 10e-6  # [m], the precision profile's hole roundness
+PLAY_TOLERANCE = 5e-6  # [m], the precision profile's tolerance on a round peg's play
 F32 = 1e-7  # [m], slack for float32 mesh vertices
 SOLIMP = [0.9, 0.95, 0.001, 0.5, 2.0]
 
@@ -35,6 +35,11 @@ def precision_model(precision_cfg: SceneConfig) -> mujoco.MjModel:
 
 def _part_ids(model: mujoco.MjModel) -> list[int]:
     return [g for g in range(model.ngeom) if model.geom(g).name.startswith("object_")]
+
+
+def _hole_sides(model: mujoco.MjModel) -> int:
+    """The precision block's parts around the hole: all its parts but the ring's four slabs."""
+    return len(_part_ids(model)) - 4
 
 
 def _hole_corners(model: mujoco.MjModel, cfg: SceneConfig, r_max: float) -> list[np.ndarray]:
@@ -113,7 +118,8 @@ def test_precision_peg_is_a_primitive_cylinder(precision_model: mujoco.MjModel) 
 def test_precision_has_one_stiff_sliding_pair_per_block_part(precision_model: mujoco.MjModel) -> None:
     m = precision_model
     parts = _part_ids(m)
-    assert len(parts) == parts_for_roundness(PEG_RADIUS + CLEARANCE, ROUNDNESS) == 71
+    # 0.1 mm of play and no chamfer: the fewest sides allowed
+    assert _hole_sides(m) == parts_for_play(CLEARANCE, PLAY_TOLERANCE) == MIN_HOLE_SIDES
     np.testing.assert_array_equal(m.geom_margin[parts], 0.0)
     assert m.npair == len(parts) + 1  # and the table
     peg = m.geom("peg").id
@@ -127,44 +133,45 @@ def test_precision_has_one_stiff_sliding_pair_per_block_part(precision_model: mu
     assert np.all(m.pair_solref[:, 0] >= 2 * m.opt.timestep)
 
 
-def test_precision_hole_is_round_within_10um(
+def test_precision_hole_lets_a_round_peg_move_as_in_a_round_hole(
     precision_model: mujoco.MjModel, precision_cfg: SceneConfig
 ) -> None:
     r_nom = PEG_RADIUS + CLEARANCE
+    n = _hole_sides(precision_model)
     corners = _hole_corners(precision_model, precision_cfg, r_max=0.0105)
-    assert [len(c) for c in corners] == [4] * 71
-    radii = np.hypot(*np.vstack(corners).T)
-    assert radii.min() >= r_nom - F32
-    assert radii.max() <= r_nom + ROUNDNESS + F32
-    flats = np.array([_flat_distance(c) for c in corners])
+    assert [len(c) for c in corners[:n]] == [4] * n
+    assert all(len(c) == 0 for c in corners[n:])  # the slabs stay away from the hole
+    flats = np.array([_flat_distance(c) for c in corners[:n]])
     np.testing.assert_allclose(flats, r_nom, rtol=0, atol=F32)  # no margin widens the hole
+    # A regular n-gon: every corner at flat / cos(pi / n).
+    radii = np.hypot(*np.vstack(corners[:n]).T)
+    np.testing.assert_allclose(radii, r_nom / math.cos(math.pi / n), rtol=0, atol=F32)
+    # The peg's axis is free in that polygon shrunk by the peg's radius (inradius: the
+    # clearance), whose corners stand within the tolerance beyond the clearance's circle.
+    play = flats.mean() - PEG_RADIUS
+    assert play * (1.0 / math.cos(math.pi / n) - 1.0) <= PLAY_TOLERANCE
 
 
-@pytest.mark.parametrize(
-    "inradius, tolerance",
-    [(0.0101, 10e-6), (0.012, 1e-3), (0.005, 1e-6), (0.02, 5e-5), (0.0111, 1e-4)],
-)
-def test_parts_for_roundness_is_the_fewest_sides_within_tolerance(inradius: float, tolerance: float) -> None:
-    n = parts_for_roundness(inradius, tolerance)
-
-    def deviation(sides: int) -> float:
-        return inradius / math.cos(math.pi / sides) - inradius
-
-    assert n > 4  # not the lower clamp, so n - 1 is a real candidate
-    assert deviation(n) <= tolerance
-    assert deviation(n - 1) > tolerance
-
-
-def test_parts_for_roundness_known_values() -> None:
-    assert parts_for_roundness(0.0101, 10e-6) == 71
-    assert parts_for_roundness(0.012, 1e-3) == 8
-    assert parts_for_roundness(0.01, 1.0) == 4  # never fewer than 4 sides
+@pytest.mark.parametrize("clearance, chamfer", [(5e-5, 1e-3), (2.5e-5, 1e-3), (1e-3, 0.0)])
+def test_precision_sides_follow_the_play_with_the_chamfer(clearance: float, chamfer: float) -> None:
+    params = PRECISION.assets(AssetParams(clearance=clearance, chamfer=chamfer))
+    play = clearance + chamfer
+    n = params.n_parts
+    assert n == parts_for_play(play, PLAY_TOLERANCE) > MIN_HOLE_SIDES
+    assert play * (1.0 / math.cos(math.pi / n) - 1.0) <= PLAY_TOLERANCE
+    assert play * (1.0 / math.cos(math.pi / (n - 1)) - 1.0) > PLAY_TOLERANCE
+    # the ring ends 3 mm outside the mouth; four slabs make the rest of the block
+    mouth = params.hole_circumradius + chamfer / math.cos(math.pi / n)
+    assert params.hole_ring == pytest.approx(mouth + 0.003, abs=1e-15)
+    assert params.part_count == n + 4
 
 
-@pytest.mark.parametrize("tolerance", [0.0, -1.0, float("nan")])
-def test_parts_for_roundness_rejects_a_bad_tolerance(tolerance: float) -> None:
+def test_parts_for_play_rejects_bad_values() -> None:
     with pytest.raises(ConfigError, match="tolerance"):
-        parts_for_roundness(0.01, tolerance)
+        parts_for_play(1e-3, 0.0)
+    with pytest.raises(ConfigError, match="play"):
+        parts_for_play(float("nan"), 1e-6)
+    assert parts_for_play(0.0, 1e-6) == MIN_HOLE_SIDES
 
 
 # --- configuration checks ----------------------------------------------------------------------
@@ -175,6 +182,7 @@ def test_parts_for_roundness_rejects_a_bad_tolerance(tolerance: float) -> None:
     [
         (AssetParams(n_parts=12), "scene.assets.n_parts"),
         (AssetParams(contact_margin=0.002), "scene.assets.contact_margin"),
+        (AssetParams(hole_ring=0.02), "scene.assets.hole_ring"),
     ],
 )
 def test_precision_rejects_asset_fields_it_sets_itself(assets: AssetParams, field: str) -> None:
