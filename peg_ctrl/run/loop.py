@@ -129,7 +129,10 @@ class PhantomGuard:
         # Plain Python over a handful of contacts: numpy's per-call cost would dominate.
         contact = data.contact
         limit = -self.depth
-        deep = [i for i, d in enumerate(contact.dist.tolist()) if d < limit]
+        dist = contact.dist.tolist()
+        if min(dist) >= limit:  # nothing that deep (the usual case); a NaN first goes on below
+            return False
+        deep = [i for i, d in enumerate(dist) if d < limit]
         if not deep:
             return False
         geoms = contact.geom.tolist()
@@ -205,7 +208,7 @@ class Loop:
         self.divergence = DivergenceMonitor()
         self.sensors = self.reader.sensor_block(self.decimation)
         self.peg_qpos = np.zeros((self.decimation, 7))
-        self._block_force = np.zeros(self.decimation)  # peg-block force of each physics step [N]
+        self._timestep = float(self.model.opt.timestep)
         self._peg_q = self.data.qpos[self.reader.peg_qpos_slice]  # a view into data
         self.timer: LoopTimer | None = None
         self._half_length = 0.5 * self.scene.assets.peg_length
@@ -342,12 +345,11 @@ class Loop:
         """Reduce the period's sensors, observe the peg and run the monitors."""
         data, sensors = self.data, self.sensors
         forces, pens = sensors.reduce()
-        block = sensors.force_sq[:, BLOCK_PEG]
-        np.sqrt(block, out=self._block_force)
-        peg = self.peg = self.reader.peg(data, float(self._block_force[-1]), self._half_length)
+        block = sensors.block_force
+        peg = self.peg = self.reader.peg(data, block[-1], self._half_length)
         try:
             self.divergence.check(data, state.t)
-            self.history.update(float(data.time), self.model.opt.timestep, self._block_force, peg)
+            self.history.update(data.time, self._timestep, block, peg)
             self.contact.check(forces, pens)
             if self.grasp is not None and self.task.grasped:
                 self.grasp.check(data, state, peg)
