@@ -102,6 +102,7 @@ _FOUND_DIST = (1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)) | (
     1 << int(mujoco.mjtConDataField.mjCONDATA_DIST)
 )
 _MINDIST = 1
+_AUTORESET = int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
 
 
 class PhantomGuard:
@@ -148,9 +149,11 @@ class PhantomGuard:
         ):
             self.sensor = int(model.sensor_adr[sid])
         self._start = np.empty(mujoco.mj_stateSize(model, self.STATE))
+        self._opt = model.opt  # the guard is this model's
         self._flags = 0
         self._warnings: list[int] = []
         self._lastinfo: list[int] = []
+        self._data: mujoco.MjData | None = None  # the data whose warning counters are viewed
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """One guarded physics step."""
@@ -168,26 +171,28 @@ class PhantomGuard:
     def begin(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """Before a period of plain steps: keep its start; MuJoCo's auto-reset off."""
         mujoco.mj_getState(model, data, self._start, self.STATE)
-        warning = data.warning
-        self._warnings, self._lastinfo = warning.number.tolist(), warning.lastinfo.tolist()
-        self._flags = model.opt.disableflags
-        model.opt.disableflags = self._flags | mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        if data is not self._data:  # views into data's arrays, fixed for its lifetime
+            self._data = data
+            self._number, self._lastinfo_view = data.warning.number, data.warning.lastinfo
+        self._warnings, self._lastinfo = self._number.tolist(), self._lastinfo_view.tolist()
+        opt = self._opt
+        self._flags = flags = opt.disableflags
+        opt.disableflags = flags | _AUTORESET
 
     def end(self, model: mujoco.MjModel, data: mujoco.MjData, rows: NDArray[np.float64]) -> bool:
         """After the period's plain steps, whose ``sensordata`` are ``rows`` (one per step):
         restore the auto-reset; if a step had a phantom or went bad, put the period back to
         its start (state and warnings) and return True: it is to be rerun with :meth:`step`."""
-        model.opt.disableflags = self._flags
+        self._opt.disableflags = self._flags
         assert self.sensor is not None
         adr, limit = self.sensor, -self.depth
         # (found, dist) of each step; a NaN distance is not trusted either
         clean = all(found == 0.0 or dist >= limit for found, dist in rows[:, adr : adr + 2].tolist())
-        warning = data.warning
-        if clean and warning.number.tolist() == self._warnings:
+        if clean and self._number.tolist() == self._warnings:
             return False
         mujoco.mj_setState(model, data, self._start, self.STATE)
-        warning.number[:] = self._warnings
-        warning.lastinfo[:] = self._lastinfo
+        self._number[:] = self._warnings
+        self._lastinfo_view[:] = self._lastinfo
         return True
 
     def _phantom(self, data: mujoco.MjData) -> bool:
