@@ -193,6 +193,8 @@ def _episode_lines(r: dict[str, Any], target: str) -> str:
         f"{r['physics_steps']} steps): raw {raw['median']:6.1f} ({raw['min']:6.1f}) us/step, "
         f"loop {lp['median']:6.1f} ({lp['min']:6.1f}), overhead {100 * ov['median']:+5.1f} % "
         f"({100 * ov['min']:+5.1f} %){'' if r['within_target'] else f'  > {target} % target'}\n"
+        f"{'':>12}efficiency {r['efficiency']:.2f} (raw physics / loop), the loop's own work "
+        f"{r['loop_own_us_per_control_step']:5.1f} us per control step (loop - physics - controller)\n"
         f"{'':>12}per control step: task {c['task'] * k:5.1f}, controller {c['controller'] * k:5.1f}, "
         f"monitors {c['monitors'] * k:5.1f}, recording {c['recording'] * k:5.1f} us "
         f"(physics {c['physics'] * k:6.1f} us for {k} steps)"

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple, Protocol
 
 import mujoco
@@ -34,7 +34,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
 from peg_ctrl.sim.ft_model import FTSensorModel, FTSensorStream
-from peg_ctrl.sim.scene import HOME_KEY, SceneConfig
+from peg_ctrl.sim.scene import HOME_KEY, SceneConfig, contact_sensor_name
 from peg_ctrl.sim.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
 from peg_ctrl.tasks.base import Evaluation, Observation, Task
 from peg_ctrl.tasks.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
@@ -96,24 +96,67 @@ class StepInfo(NamedTuple):
     peg_qpos: NDArray[np.float64]  # (decimation, 7) the peg's pose after each physics step
 
 
+# A contact sensor's data (mjtConDataField bits) and reduction: the number of matching contacts
+# and the distance of the closest one.
+_FOUND_DIST = (1 << int(mujoco.mjtConDataField.mjCONDATA_FOUND)) | (
+    1 << int(mujoco.mjtConDataField.mjCONDATA_DIST)
+)
+_MINDIST = 1
+_AUTORESET = int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+
+
 class PhantomGuard:
     """Steps the physics, recomputing a step's collisions without multiccd when the collider
     returns a phantom peg-block contact (deeper than ``depth`` [m]; see
     :attr:`peg_ctrl.sim.physics.PhysicsProfile.phantom_depth`).
 
-    ``mj_step1`` + ``mj_step2`` is bit-identical to ``mj_step`` (not available for RK4), so a
-    step without a phantom is exactly the plain one. ``count`` is the number of recomputed steps.
+    :meth:`step` is one guarded step: ``mj_step1`` + ``mj_step2`` is bit-identical to
+    ``mj_step`` (not available for RK4), so a step without a phantom is exactly the plain one.
+    ``count`` is the number of recomputed steps.
+
+    A control period's steps are cheaper checked afterwards (:meth:`begin`, plain ``mj_step``,
+    :meth:`end`): the scene's peg-block contact sensor holds the smallest distance among exactly
+    the contacts each step's collision returned (``found``, ``dist``; computed in its
+    ``mj_step2``), and with MuJoCo's auto-reset off a step gone bad leaves a new warning and
+    nothing else. A period with neither was the guarded one, step for step; one with either
+    is put back to its start, to be rerun with :meth:`step`. A model without that sensor
+    (``sensor`` None) is guarded step by step.
     """
+
+    STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # what a step starts from, in full
 
     def __init__(self, model: mujoco.MjModel, depth: float) -> None:
         if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
             raise ValueError("the phantom-contact guard needs a split step; RK4 has none")
         self.depth = depth
-        self._peg = set(np.flatnonzero(model.geom_bodyid == model.body("peg").id).tolist())
-        self._block = set(np.flatnonzero(model.geom_bodyid == model.body("block").id).tolist())
+        peg, block = model.body("peg").id, model.body("block").id
+        self._peg = set(np.flatnonzero(model.geom_bodyid == peg).tolist())
+        self._block = set(np.flatnonzero(model.geom_bodyid == block).tolist())
         self.count = 0
+        #: sensordata address of the peg-block contact sensor's (found, dist), or None.
+        self.sensor: int | None = None
+        name = contact_sensor_name("dist", "block", "peg")
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, name)
+        body = int(mujoco.mjtObj.mjOBJ_BODY)
+        if (
+            sid >= 0
+            and {
+                (int(model.sensor_objtype[sid]), int(model.sensor_objid[sid])),
+                (int(model.sensor_reftype[sid]), int(model.sensor_refid[sid])),
+            }
+            == {(body, peg), (body, block)}  # exactly the contacts _phantom looks at
+            and model.sensor_intprm[sid][:3].tolist() == [_FOUND_DIST, _MINDIST, 1]
+        ):
+            self.sensor = int(model.sensor_adr[sid])
+        self._start = np.empty(mujoco.mj_stateSize(model, self.STATE))
+        self._opt = model.opt  # the guard is this model's
+        self._flags = 0
+        self._warnings: list[int] = []
+        self._lastinfo: list[int] = []
+        self._data: mujoco.MjData | None = None  # the data whose warning counters are viewed
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """One guarded physics step."""
         mujoco.mj_step1(model, data)
         if data.ncon and self._phantom(data):
             flags = model.opt.disableflags
@@ -125,11 +168,41 @@ class PhantomGuard:
             self.count += 1
         mujoco.mj_step2(model, data)
 
+    def begin(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Before a period of plain steps: keep its start; MuJoCo's auto-reset off."""
+        mujoco.mj_getState(model, data, self._start, self.STATE)
+        if data is not self._data:  # views into data's arrays, fixed for its lifetime
+            self._data = data
+            self._number, self._lastinfo_view = data.warning.number, data.warning.lastinfo
+        self._warnings, self._lastinfo = self._number.tolist(), self._lastinfo_view.tolist()
+        opt = self._opt
+        self._flags = flags = opt.disableflags
+        opt.disableflags = flags | _AUTORESET
+
+    def end(self, model: mujoco.MjModel, data: mujoco.MjData, rows: NDArray[np.float64]) -> bool:
+        """After the period's plain steps, whose ``sensordata`` are ``rows`` (one per step):
+        restore the auto-reset; if a step had a phantom or went bad, put the period back to
+        its start (state and warnings) and return True: it is to be rerun with :meth:`step`."""
+        self._opt.disableflags = self._flags
+        assert self.sensor is not None
+        adr, limit = self.sensor, -self.depth
+        # (found, dist) of each step; a NaN distance is not trusted either
+        clean = all(found == 0.0 or dist >= limit for found, dist in rows[:, adr : adr + 2].tolist())
+        if clean and self._number.tolist() == self._warnings:
+            return False
+        mujoco.mj_setState(model, data, self._start, self.STATE)
+        self._number[:] = self._warnings
+        self._lastinfo_view[:] = self._lastinfo
+        return True
+
     def _phantom(self, data: mujoco.MjData) -> bool:
         # Plain Python over a handful of contacts: numpy's per-call cost would dominate.
         contact = data.contact
         limit = -self.depth
-        deep = [i for i, d in enumerate(contact.dist.tolist()) if d < limit]
+        dist = contact.dist.tolist()
+        if min(dist) >= limit:  # nothing that deep (the usual case); a NaN first goes on below
+            return False
+        deep = [i for i, d in enumerate(dist) if d < limit]
         if not deep:
             return False
         geoms = contact.geom.tolist()
@@ -205,7 +278,7 @@ class Loop:
         self.divergence = DivergenceMonitor()
         self.sensors = self.reader.sensor_block(self.decimation)
         self.peg_qpos = np.zeros((self.decimation, 7))
-        self._block_force = np.zeros(self.decimation)  # peg-block force of each physics step [N]
+        self._timestep = float(self.model.opt.timestep)
         self._peg_q = self.data.qpos[self.reader.peg_qpos_slice]  # a view into data
         self.timer: LoopTimer | None = None
         self._half_length = 0.5 * self.scene.assets.peg_length
@@ -329,25 +402,41 @@ class Loop:
         """Apply ``out`` and run the control period's physics steps, keeping their sensors."""
         model, data = self.model, self.data
         data.ctrl[:] = out.ctrl
+        guard = self.guard
+        if guard is None:
+            self._steps(mujoco.mj_step)
+        elif guard.sensor is None:
+            self._steps(guard.step)
+        else:  # plain steps checked afterwards, rerun guarded if need be (see PhantomGuard)
+            guard.begin(model, data)
+            try:
+                self._steps(mujoco.mj_step)
+            finally:
+                rerun = guard.end(model, data, self.sensors.raw)
+            if rerun:
+                self._steps(guard.step)
+        self.steps += self.decimation
+        self._sensed = None  # a new period: a new reading
+
+    def _steps(self, step: Callable[[mujoco.MjModel, mujoco.MjData], None]) -> None:
+        """The period's physics steps by ``step``, each followed by a copy of its sensors and
+        of the peg's pose."""
+        model, data = self.model, self.data
         raw, sd, peg_log, peg_q = self.sensors.raw, data.sensordata, self.peg_qpos, self._peg_q
-        step = mujoco.mj_step if self.guard is None else self.guard.step
         for i in range(self.decimation):
             step(model, data)
             raw[i] = sd
             peg_log[i] = peg_q
-        self.steps += self.decimation
-        self._sensed = None  # a new period: a new reading
 
     def _monitor(self, state: ControlState) -> tuple[list[float], list[float], EpisodeFailure | None]:
         """Reduce the period's sensors, observe the peg and run the monitors."""
         data, sensors = self.data, self.sensors
         forces, pens = sensors.reduce()
-        block = sensors.force_sq[:, BLOCK_PEG]
-        np.sqrt(block, out=self._block_force)
-        peg = self.peg = self.reader.peg(data, float(self._block_force[-1]), self._half_length)
+        block = sensors.block_force
+        peg = self.peg = self.reader.peg(data, block[-1], self._half_length)
         try:
             self.divergence.check(data, state.t)
-            self.history.update(float(data.time), self.model.opt.timestep, self._block_force, peg)
+            self.history.update(data.time, self._timestep, block, peg)
             self.contact.check(forces, pens)
             if self.grasp is not None and self.task.grasped:
                 self.grasp.check(data, state, peg)

@@ -39,7 +39,7 @@ __all__ = [
 
 
 def _round(values: Any, digits: int = 6) -> list[float]:
-    return [round(float(v), digits) for v in values]
+    return [round(v, digits) for v in np.asarray(values, dtype=float).tolist()]
 
 
 class TraceRecorder:

@@ -19,15 +19,16 @@ removes it with a tare taken while the hand is known to be free, and low-passes 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.sim.ft_model import DelayLine
-from peg_ctrl.sim.rotations import cross, rotate, rotate_inv
+from peg_ctrl.sim.rotations import Floats3, cross, cross_floats, rotate, rotate_floats, rotate_inv
 from peg_ctrl.sim.scene import FT_SITE, HOME_KEY
-from peg_ctrl.sim.state import ControlState, ft_world
+from peg_ctrl.sim.state import ControlState
 
 __all__ = ["Detector", "WristModel", "WristSensor", "WrenchPredictor", "lowpass_alpha", "within"]
 
@@ -55,19 +56,46 @@ class WristModel:
         r_root = scratch.xmat[root].reshape(3, 3)
         self.site_body = r_root.T @ (scratch.site_xpos[model.site(FT_SITE).id] - scratch.xpos[root])
         self.com_body = r_root.T @ (scratch.subtree_com[mount] - scratch.xpos[root])
+        self._gravity = tuple(self.gravity.tolist())
+        self._site_body = tuple(self.site_body.tolist())
+        self._com_body = tuple(self.com_body.tolist())
 
     def contact_wrench(self, state: ControlState, centre_body: _Vec, accel_ref: _Vec) -> tuple[_Vec, _Vec]:
         """Contact force on the hand [N] and its moment about ``centre_body`` (gripper frame,
         from the pinch point) [N m], both world frame, unfiltered and untared. ``accel_ref``
         (3,) [m/s^2] is the hand's expected acceleration (zero for quasi-static use)."""
-        f_world, t_world = ft_world(state)
-        f_ext = self.mass * (accel_ref - self.gravity) - f_world
-        q = state.quat_world
-        site = rotate(q, self.site_body)  # relative to the pinch point
-        com = rotate(q, self.com_body)
-        centre = rotate(q, centre_body)
-        inertia = self.mass * (accel_ref - self.gravity)  # the hand's weight and inertia [N]
-        tau = -t_world + cross(com - site, inertia) + cross(site - centre, f_ext)
+        f, tau = self.contact_wrench_floats(
+            state.quat_world.tolist(),
+            state.ft_wrench.tolist(),
+            np.asarray(centre_body, dtype=float).tolist(),
+            np.asarray(accel_ref, dtype=float).tolist(),
+        )
+        return np.array(f), np.array(tau)
+
+    def contact_wrench_floats(
+        self,
+        quat: Sequence[float],
+        ft: Sequence[float],
+        centre_body: Sequence[float],
+        accel_ref: Sequence[float],
+    ) -> tuple[Floats3, Floats3]:
+        """:meth:`contact_wrench` in plain floats (every control step: no array is worth its
+        cost here), from the gripper's ``quat`` and the sensor's reading ``ft`` (6,); the same
+        arithmetic as its array form, so the same bits."""
+        fx, fy, fz, tx, ty, tz = ft
+        f_world = rotate_floats(quat, (fx, -fy, -fz))  # sensor frame -> gripper frame: 180 deg about X
+        t_world = rotate_floats(quat, (tx, -ty, -tz))
+        m = self.mass
+        g0, g1, g2 = self._gravity
+        a0, a1, a2 = accel_ref
+        inertia = (m * (a0 - g0), m * (a1 - g1), m * (a2 - g2))  # the hand's weight and inertia [N]
+        f_ext = (inertia[0] - f_world[0], inertia[1] - f_world[1], inertia[2] - f_world[2])
+        sx, sy, sz = rotate_floats(quat, self._site_body)  # relative to the pinch point
+        cx, cy, cz = rotate_floats(quat, self._com_body)
+        ox, oy, oz = rotate_floats(quat, centre_body)
+        u = cross_floats((cx - sx, cy - sy, cz - sz), inertia)
+        w = cross_floats((sx - ox, sy - oy, sz - oz), f_ext)
+        tau = (-t_world[0] + u[0] + w[0], -t_world[1] + u[1] + w[1], -t_world[2] + u[2] + w[2])
         return f_ext, tau
 
 
@@ -104,7 +132,8 @@ class WristSensor:
         force_bias: (3,) the force bias, world frame [N]; moment_bias_body (3,) the moment's,
             gripper frame [N m].
         noise_force: (3,) standard deviation of one force reading, world axes [N] (0 before a tare).
-        noise_moment: (3,) ... of one moment reading, gripper axes (like its bias) [N m].
+        noise_moment: (3,) ... of one moment reading, gripper axes (like its bias) [N m]. Both
+            read-only: a new estimate is assigned, not written into them.
     """
 
     def __init__(
@@ -132,6 +161,8 @@ class WristSensor:
         # Variance of a first-order low-pass's output per unit variance of white input.
         self._gain_force = self._a_force / (2.0 - self._a_force)
         self._gain_moment = self._a_moment / (2.0 - self._a_moment)
+        self._sigma_force: _Vec | None = None  # from the noise and the resolution, when asked
+        self._sigma_moment: _Vec | None = None
         self.resolution = resolution
         self.fast_moment = fast_moment
         self._zero = np.zeros(3)
@@ -151,29 +182,84 @@ class WristSensor:
         self.moment = np.zeros(3)
         self.moment_fast = np.zeros(3)
         self.accel = np.zeros(3)
-        self._v_prev: _Vec | None = None
+        self._v_prev: Floats3 | None = None
+
+    # The noise estimates and the resolution are read-only arrays, replaced (never changed in
+    # place) when they change, so that the sigmas they give are computed once per change, not
+    # at every reading a detector tests against them.
+    @property
+    def noise_force(self) -> _Vec:
+        return self._noise_force
+
+    @noise_force.setter
+    def noise_force(self, value: _Vec) -> None:
+        self._noise_force = _frozen(value)
+        self._sigma_force = None
+
+    @property
+    def noise_moment(self) -> _Vec:
+        return self._noise_moment
+
+    @noise_moment.setter
+    def noise_moment(self, value: _Vec) -> None:
+        self._noise_moment = _frozen(value)
+        self._sigma_moment = None
+
+    @property
+    def resolution(self) -> tuple[float, float]:
+        """The floor of ``sigma_force`` [N] and ``sigma_moment`` [N m]."""
+        return self._resolution
+
+    @resolution.setter
+    def resolution(self, value: tuple[float, float]) -> None:
+        self._resolution = value
+        self._sigma_force = self._sigma_moment = None
 
     @property
     def sigma_force(self) -> _Vec:
-        """(3,) Standard deviation of the filtered force, world axes [N]."""
-        return np.sqrt(self.noise_force**2 * self._gain_force + self.resolution[0] ** 2)
+        """(3,) Standard deviation of the filtered force, world axes [N] (read-only)."""
+        if self._sigma_force is None:
+            self._sigma_force = _frozen(
+                np.sqrt(self._noise_force**2 * self._gain_force + self._resolution[0] ** 2)
+            )
+        return self._sigma_force
 
     @property
     def sigma_moment(self) -> _Vec:
-        """(3,) Standard deviation of the filtered moment [N m]."""
-        return np.sqrt(self.noise_moment**2 * self._gain_moment + self.resolution[1] ** 2)
+        """(3,) Standard deviation of the filtered moment [N m] (read-only)."""
+        if self._sigma_moment is None:
+            self._sigma_moment = _frozen(
+                np.sqrt(self._noise_moment**2 * self._gain_moment + self._resolution[1] ** 2)
+            )
+        return self._sigma_moment
 
     def _wrench(self, state: ControlState, accel_ref: _Vec | None) -> tuple[_Vec, _Vec]:
         if accel_ref is None:
             accel_ref = self.accel if self._a_accel else self._zero
         return self.wrist.contact_wrench(state, self.centre_body, accel_ref)
 
+    # Every control step (update, and raw for some controllers) runs in plain floats, the same
+    # arithmetic as the arrays', operation for operation: the same bits, a fraction of the time.
+    def _raw_floats(
+        self, state: ControlState, quat: list[float], accel_ref: _Vec | None
+    ) -> tuple[Floats3, Floats3]:
+        if accel_ref is None:
+            accel = self.accel.tolist() if self._a_accel else [0.0, 0.0, 0.0]
+        else:
+            accel = np.asarray(accel_ref, dtype=float).tolist()
+        f, tau = self.wrist.contact_wrench_floats(
+            quat, state.ft_wrench.tolist(), self.centre_body.tolist(), accel
+        )
+        b0, b1, b2 = self.force_bias.tolist()
+        m0, m1, m2 = rotate_floats(quat, self.moment_bias_body.tolist())
+        return (f[0] - b0, f[1] - b1, f[2] - b2), (tau[0] - m0, tau[1] - m1, tau[2] - m2)
+
     def raw(self, state: ControlState, *, accel_ref: _Vec | None = None) -> tuple[_Vec, _Vec]:
         """The tared, unfiltered wrench (force [N], moment [N m], world). ``accel_ref`` (3,)
         [m/s^2]: the hand's acceleration to compensate; None: the measured one (``accel_hz``),
         or zero."""
-        f, tau = self._wrench(state, accel_ref)
-        return f - self.force_bias, tau - rotate(state.quat_world, self.moment_bias_body)
+        f, tau = self._raw_floats(state, state.quat_world.tolist(), accel_ref)
+        return np.array(f), np.array(tau)
 
     def accumulate_tare(self, state: ControlState, *, accel_ref: _Vec | None = None) -> None:
         """Add this reading to the tare and the noise estimate (the hand must be free of
@@ -195,28 +281,37 @@ class WristSensor:
         self, state: ControlState, *, free: bool = False, accel_ref: _Vec | None = None
     ) -> tuple[_Vec, _Vec]:
         """Filter in this reading (taring first while the timed tare runs; following the bias
-        while ``free``); the filtered wrench. ``accel_ref`` as for :meth:`raw`."""
+        while ``free``); the filtered wrench (:attr:`force` and :attr:`moment`, updated in
+        place). ``accel_ref`` as for :meth:`raw`."""
         if state.t - self._t0 < self.tare_time:
             self.accumulate_tare(state, accel_ref=accel_ref)
         else:
             self._track_accel(state)
-        f, tau = self.raw(state, accel_ref=accel_ref)
+        quat = state.quat_world.tolist()
+        f, tau = self._raw_floats(state, quat, accel_ref)
         if free and self._n:
-            self.force_bias += self._a_bias * f
-            self.moment_bias_body += self._a_bias * rotate_inv(state.quat_world, tau)
-        self.force += self._a_force * (f - self.force)
-        self.moment += self._a_moment * (tau - self.moment)
+            w, x, y, z = quat
+            _add_scaled(self.force_bias, self._a_bias, f)
+            _add_scaled(self.moment_bias_body, self._a_bias, rotate_floats((w, -x, -y, -z), tau))
+        _follow(self.force, self._a_force, f)
+        _follow(self.moment, self._a_moment, tau)
         if self.fast_moment:
-            self.moment_fast += self._a_force * (tau - self.moment_fast)
+            _follow(self.moment_fast, self._a_force, tau)
         return self.force, self.moment
 
     def _track_accel(self, state: ControlState) -> None:
         if not self._a_accel:
             return
-        v = state.v_world
+        v = state.v_world.tolist()
         if self._v_prev is not None:
-            self.accel += self._a_accel * ((v - self._v_prev) / self.dt - self.accel)
-        self._v_prev = v.copy()
+            a, dt, (p0, p1, p2) = self._a_accel, self.dt, self._v_prev
+            x0, x1, x2 = self.accel.tolist()
+            self.accel[:] = (
+                x0 + a * ((v[0] - p0) / dt - x0),
+                x1 + a * ((v[1] - p1) / dt - x1),
+                x2 + a * ((v[2] - p2) / dt - x2),
+            )
+        self._v_prev = (v[0], v[1], v[2])
 
     def move_centre(self, centre_body: _Vec, state: ControlState) -> None:
         """Take moments about another point of the gripper frame from now on, keeping the tare
@@ -235,6 +330,25 @@ class WristSensor:
         """The filtered moment moved to another point of the gripper frame [N m], world."""
         q = state.quat_world
         return self.moment + cross(rotate(q, self.centre_body) - rotate(q, point_body), self.force)
+
+
+def _frozen(value: _Vec) -> _Vec:
+    """A read-only float copy of ``value``."""
+    out = np.array(value, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+def _follow(x: _Vec, alpha: float, target: Floats3) -> None:
+    """One step of a first-order low-pass, in place: ``x += alpha * (target - x)``."""
+    x0, x1, x2 = x.tolist()
+    x[:] = (x0 + alpha * (target[0] - x0), x1 + alpha * (target[1] - x1), x2 + alpha * (target[2] - x2))
+
+
+def _add_scaled(x: _Vec, alpha: float, v: Floats3) -> None:
+    """``x += alpha * v`` in place."""
+    x0, x1, x2 = x.tolist()
+    x[:] = (x0 + alpha * v[0], x1 + alpha * v[1], x2 + alpha * v[2])
 
 
 class WrenchPredictor:

@@ -148,6 +148,47 @@ class SimState:
         return None
 
 
+class _PairSum:
+    """The sums over one pair's contacts: force [N], force-weighted position [N m], total
+    force magnitude [N], count, deepest penetration [m] (0 floor)."""
+
+    __slots__ = ("force", "weighted_pos", "total", "count", "pen")
+
+    def __init__(self) -> None:
+        self.force = (0.0, 0.0, 0.0)
+        self.weighted_pos = (0.0, 0.0, 0.0)
+        self.total = 0.0
+        self.count = 0
+        self.pen = 0.0
+
+    def add(self, f: tuple[float, float, float], mag: float, pos: list[float], pen: float) -> None:
+        fx, fy, fz = self.force
+        self.force = (fx + f[0], fy + f[1], fz + f[2])
+        px, py, pz = self.weighted_pos
+        self.weighted_pos = (px + mag * pos[0], py + mag * pos[1], pz + mag * pos[2])
+        self.total += mag
+        self.count += 1
+        self.pen = max(self.pen, pen)
+
+
+class _DataViews:
+    """Views into one ``MjData``'s arrays that :class:`StateReader` reads every control step:
+    the gripper's and the peg's joints, the wrist sensor, the pads. Made once per data (its
+    arrays never move), they spare the bindings' accessors, which build a new array per call."""
+
+    def __init__(self, reader: StateReader, data: mujoco.MjData) -> None:
+        self.data = data
+        q0, v0 = reader._q0, reader._v0
+        self.p, self.quat = data.qpos[q0 : q0 + 3], data.qpos[q0 + 3 : q0 + 7]
+        self.v, self.omega = data.qvel[v0 : v0 + 3], data.qvel[v0 + 3 : v0 + 6]
+        ft = reader._ft
+        self.ft = data.sensordata[ft : ft + 6] if ft >= 0 else None
+        left, right = reader._pads
+        self.pad_left, self.pad_right = data.geom_xpos[left], data.geom_xpos[right]
+        self.peg_q = data.qpos[reader.peg_qpos_slice]
+        self.peg_v = data.qvel[reader._peg_v : reader._peg_v + 3]
+
+
 class StateReader:
     """Reads :class:`ControlState` / :class:`SimState` from ``MjData`` using indices resolved once."""
 
@@ -171,6 +212,7 @@ class StateReader:
         # Box half-thickness along the closing direction (local y of the pad boxes).
         self._pad_half_sum = float(sum(model.geom_size[g][1] for g in self._pads))
         self._body_group = self._classify_bodies(model)
+        self._geom_group = [BODY_GROUPS[g] for g in self._body_group[model.geom_bodyid].tolist()]
         force = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, "ft_force")
         torque = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, "ft_torque")
         self._ft = -1
@@ -204,6 +246,7 @@ class StateReader:
             (int(model.sensor_adr[pads[0]]), int(model.sensor_adr[pads[1]])) if min(pads) >= 0 else None
         )
         self._one_step: SensorBlock | None = None  # pair_forces' block of one row
+        self._bound: _DataViews | None = None  # views into the data read last
 
     @staticmethod
     def _classify_bodies(model: mujoco.MjModel) -> NDArray[np.int64]:
@@ -220,69 +263,101 @@ class StateReader:
         groups[model.body("block").id] = BODY_GROUPS.index("block")
         return groups
 
+    def _views(self, data: mujoco.MjData) -> _DataViews:
+        """The views into ``data`` read every control step (made once per ``data``)."""
+        views = self._bound
+        if views is None or views.data is not data:
+            views = self._bound = _DataViews(self, data)
+        return views
+
     def jaw_sep_m(self, data: mujoco.MjData) -> float:
         """Distance between the inner faces of the two pads [m] (from the last kinematics pass)."""
-        left, right = self._pads
-        xl = data.geom_xpos[left].tolist()
-        xr = data.geom_xpos[right].tolist()
+        views = self._views(data)
+        xl = views.pad_left.tolist()
+        xr = views.pad_right.tolist()
         dist = math.sqrt((xr[0] - xl[0]) ** 2 + (xr[1] - xl[1]) ** 2 + (xr[2] - xl[2]) ** 2)
         return dist - self._pad_half_sum
 
     def control_state(self, data: mujoco.MjData) -> ControlState:
-        q = data.qpos[self._q0 : self._q0 + 7].copy()
-        v = data.qvel[self._v0 : self._v0 + 6].copy()
-        ft = data.sensordata[self._ft : self._ft + 6].copy() if self._ft >= 0 else np.zeros(6)
-        return ControlState(float(data.time), q[:3], q[3:], v[:3], v[3:], self.jaw_sep_m(data), ft)
+        views = self._views(data)
+        ft = views.ft.copy() if views.ft is not None else np.zeros(6)
+        return ControlState(
+            float(data.time),
+            views.p.copy(),
+            views.quat.copy(),
+            views.v.copy(),
+            views.omega.copy(),
+            self.jaw_sep_m(data),
+            ft,
+        )
 
     def peg(self, data: mujoco.MjData, force_block: float, half_length: float) -> PegObservation:
         """The peg's pose, axis and lower end; ``half_length`` [m] is half the peg's length."""
         # Plain floats: this runs every control step.
-        px, py, pz, w, x, y, z = data.qpos[self._peg_q : self._peg_q + 7].tolist()
-        vx, vy, vz = data.qvel[self._peg_v : self._peg_v + 3].tolist()
-        axis = np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])
-        sign = -1.0 if axis[2] >= 0.0 else 1.0  # towards the lower end
-        p = np.array([px, py, pz])
-        bottom = p + (sign * half_length) * axis
+        views = self._views(data)
+        px, py, pz, w, x, y, z = views.peg_q.tolist()
+        vx, vy, vz = views.peg_v.tolist()
+        ax, ay, az = 2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)
+        s = (-1.0 if az >= 0.0 else 1.0) * half_length  # towards the lower end
         speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-        return PegObservation(p, np.array([w, x, y, z]), axis, bottom, speed, force_block)
+        return PegObservation(
+            np.array([px, py, pz]),
+            np.array([w, x, y, z]),
+            np.array([ax, ay, az]),
+            np.array([px + s * ax, py + s * ay, pz + s * az]),
+            speed,
+            force_block,
+        )
 
     def contacts(self, data: mujoco.MjData) -> tuple[PairContact, ...]:
         """Contacts above the threshold, summed per body-group pair, sorted by pair name."""
         model = self.model
-        if data.ncon == 0:
+        ncon = data.ncon
+        if ncon == 0:
             return ()
-        sums: dict[tuple[str, str], list] = {}
+        sums: dict[tuple[str, str], _PairSum] = {}
         wrench = np.zeros(6)
-        for i in range(data.ncon):
-            con = data.contact[i]
-            if con.efc_address < 0:
+        # The contacts' fields read once (indexing data.contact builds an object per contact),
+        # and plain floats: the contact frame's transpose times the force is the matrix-vector
+        # product numpy takes, term by term in its order, and |f| its sqrt(f . f).
+        contact = data.contact
+        efc, geom1, geom2 = contact.efc_address.tolist(), contact.geom1.tolist(), contact.geom2.tolist()
+        frames, positions = contact.frame.tolist(), contact.pos.tolist()
+        dist, includemargin = contact.dist.tolist(), contact.includemargin.tolist()
+        group = self._geom_group
+        for i in range(ncon):
+            if efc[i] < 0:
                 continue  # detected within the margin but not active
-            mujoco.mj_contactForce(model, data, i, wrench)
-            frame = con.frame.reshape(3, 3)
-            f_world = frame.T @ wrench[:3]  # force on geom2 from geom1, world frame
-            g1 = BODY_GROUPS[self._body_group[model.geom_bodyid[con.geom1]]]
-            g2 = BODY_GROUPS[self._body_group[model.geom_bodyid[con.geom2]]]
+            g1, g2 = group[geom1[i]], group[geom2[i]]
             if g1 == g2:
                 continue
+            mujoco.mj_contactForce(model, data, i, wrench)
+            a, b, c = wrench[:3].tolist()
+            r = frames[i]  # rows: the contact frame's axes, world frame
+            # the force on geom2 from geom1, world frame
+            fx = r[0] * a + r[3] * b + r[6] * c
+            fy = r[1] * a + r[4] * b + r[7] * c
+            fz = r[2] * a + r[5] * b + r[8] * c
+            mag = math.sqrt(fx * fx + fy * fy + fz * fz)
             # Report the force acting on the alphabetically first group.
             if g1 < g2:
-                pair, f_on_first = (g1, g2), -f_world
+                pair, fx, fy, fz = (g1, g2), -fx, -fy, -fz
             else:
-                pair, f_on_first = (g2, g1), f_world
-            entry = sums.setdefault(pair, [np.zeros(3), np.zeros(3), 0.0, 0, 0.0])
-            mag = float(np.linalg.norm(f_on_first))
-            entry[0] += f_on_first
-            entry[1] += mag * con.pos
-            entry[2] += mag
-            entry[3] += 1
-            entry[4] = max(entry[4], con.includemargin - float(con.dist))
+                pair = (g2, g1)
+            entry = sums.get(pair)
+            if entry is None:
+                entry = sums[pair] = _PairSum()
+            entry.add((fx, fy, fz), mag, positions[i], includemargin[i] - dist[i])
         out = []
         for pair in sorted(sums):
-            force, weighted_pos, total, count, pen = sums[pair]
-            magnitude = float(np.linalg.norm(force))
+            entry = sums[pair]
+            total = entry.total
             if total < self.contact_threshold_n:
                 continue
-            out.append(PairContact(pair, force, magnitude, weighted_pos / total, count, max(pen, 0.0)))
+            fx, fy, fz = entry.force
+            magnitude = math.sqrt(fx * fx + fy * fy + fz * fz)
+            force, position = np.array(entry.force), np.array(entry.weighted_pos) / total
+            out.append(PairContact(pair, force, magnitude, position, entry.count, max(entry.pen, 0.0)))
         return tuple(out)
 
     def pair_forces(self, data: mujoco.MjData) -> tuple[list[float], list[float]]:
@@ -318,13 +393,11 @@ class SensorBlock:
     """The contact sensors of the physics steps of one control period, read in bulk.
 
     The loop copies ``data.sensordata`` into row ``i`` of :attr:`raw` after each of its physics
-    steps (one copy in C per step). :meth:`reduce` then computes, in a few numpy calls into
-    preallocated arrays, the squared net force per pair of :data:`PAIRS` of every row
-    (:attr:`force_sq`, (rows, len(PAIRS)) [N^2]: a matrix product of the squared sensor values),
-    and returns the peak force per pair and the peak penetration per peg partner over the rows,
-    as :meth:`StateReader.pair_forces` computes them for one step. :meth:`forces` and
-    :meth:`penetrations` give every row of any block of sensor rows (for the force trace, off
-    the hot path).
+    steps (one copy in C per step). :meth:`reduce` then gives the peak force per pair of
+    :data:`PAIRS` and the peak penetration per peg partner over the rows, as
+    :meth:`StateReader.pair_forces` computes them for one step, and the peg-block force of every
+    row (:attr:`block_force`). :meth:`forces` and :meth:`penetrations` give every row of any
+    block of sensor rows (for the force trace, off the hot path).
     """
 
     def __init__(
@@ -339,23 +412,52 @@ class SensorBlock:
         self.rows = rows
         self._grip = grip
         self.raw = np.zeros((rows, nsensordata))
-        self.force_sq = np.zeros((rows, len(PAIRS)))
-        self._sq = np.zeros((rows, nsensordata))
+        #: The peg-block force of each row [N] (from the last :meth:`reduce`).
+        self.block_force = [0.0] * rows
         self._sum = np.zeros((nsensordata, len(PAIRS)))  # sums each pair's squared x, y, z
         for k, adr in force_sensors:
             self._sum[adr + 1 : adr + 4, k] = 1.0
-        self._peak_sq = np.zeros(len(PAIRS))
+        self._force = [(k, adr + 1) for k, adr in force_sensors]  # pair, address of its x
         self._dist = [(k, adr, margin) for k, adr, margin in dist_sensors]
 
     def reduce(self) -> tuple[list[float], list[float]]:
-        """Fill :attr:`force_sq`; the peak force per pair [N] and the peak penetration per peg
-        partner [m] over the rows."""
-        np.multiply(self.raw, self.raw, out=self._sq)
-        np.matmul(self._sq, self._sum, out=self.force_sq)
-        np.max(self.force_sq, axis=0, out=self._peak_sq)
-        forces = [math.sqrt(f) for f in self._peak_sq.tolist()]
+        """The peak force per pair [N] and the peak penetration per peg partner [m] over the
+        rows; fills :attr:`block_force`."""
+        # Plain floats: a few dozen numbers per control period, where numpy's per-call cost
+        # would dominate. Bit for bit what the array code (_reduce_arrays) computes: each
+        # pair's x*x + y*y + z*z is the sum its matrix product takes, in the same order.
+        rows = self.raw.tolist()
+        for row in rows:
+            if not math.isfinite(sum(row)):  # a diverging step: numpy's NaN and inf propagation
+                return self._reduce_arrays()
+        peak = [0.0] * len(PAIRS)  # squared [N^2]
+        block = [0.0] * len(rows)
+        for i, row in enumerate(rows):
+            for k, x in self._force:
+                fx, fy, fz = row[x], row[x + 1], row[x + 2]
+                sq = fx * fx + fy * fy + fz * fz
+                if sq > peak[k]:
+                    peak[k] = sq
+                if k == BLOCK_PEG:
+                    block[i] = math.sqrt(sq)
+        self.block_force = block
         pens = [0.0] * len(PEG_PARTNERS)
+        for k, adr, margin in self._dist:
+            closest = math.inf  # the closest distance where a contact was found
+            for row in rows:
+                if row[adr] > 0.0 and row[adr + 1] < closest:
+                    closest = row[adr + 1]
+            if closest < math.inf:
+                pens[k] = max(0.0, margin - closest)
+        return [math.sqrt(f) for f in peak], pens
+
+    def _reduce_arrays(self) -> tuple[list[float], list[float]]:
+        """:meth:`reduce` in numpy, for rows that are not all finite."""
         raw = self.raw
+        force_sq = (raw * raw) @ self._sum
+        self.block_force = np.sqrt(force_sq[:, BLOCK_PEG]).tolist()
+        forces = [math.sqrt(f) for f in np.max(force_sq, axis=0).tolist()]
+        pens = [0.0] * len(PEG_PARTNERS)
         for k, adr, margin in self._dist:
             found = raw[:, adr]
             if found.any():  # the closest distance where a contact was found

@@ -16,11 +16,11 @@ episode's outcome.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol
 
 import mujoco
 import numpy as np
-from numpy.typing import NDArray
 
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.sim.scene import GRIPPER_PREFIX, SceneConfig
@@ -129,23 +129,22 @@ class InsertionMonitor:
         self.last: InsertionMeasure | None = None
 
     def measure(self, peg: PegObservation) -> InsertionMeasure:
-        axis = peg.axis_world
-        p = peg.p_world
-        hx, hy = self.hole_x, self.hole_y
-        depth = self.block_top - float(peg.bottom_world[2])
-        tilt = math.acos(min(1.0, abs(float(axis[2]))))
+        # Plain floats: this runs every control step.
+        ax, ay, az = peg.axis_world.tolist()
+        px, py, pz = peg.p_world.tolist()
+        bottom_z = peg.bottom_world.item(2)
+        hx, hy, top = self.hole_x, self.hole_y, self.block_top
+        tilt = math.acos(min(1.0, abs(az)))
         at_hole = False
-        if abs(axis[2]) > 1e-6:
-            s = (self.block_top - p[2]) / axis[2]
-            dx, dy = float(p[0] + s * axis[0] - hx), float(p[1] + s * axis[1] - hy)
+        if abs(az) > 1e-6:
+            s = (top - pz) / az
+            dx, dy = px + s * ax - hx, py + s * ay - hy
             lateral = math.hypot(dx, dy)
             at_hole = tilt <= AT_HOLE_MAX_TILT and abs(dx) <= self.half_x and abs(dy) <= self.half_y
         else:
             lateral = math.inf
-        radial = math.hypot(float(p[0]) - hx, float(p[1]) - hy)
-        self.last = InsertionMeasure(
-            depth, lateral, radial, float(peg.bottom_world[2]), tilt, peg.speed, at_hole
-        )
+        radial = math.hypot(px - hx, py - hy)
+        self.last = InsertionMeasure(top - bottom_z, lateral, radial, bottom_z, tilt, peg.speed, at_hole)
         return self.last
 
     def inserted(self, peg: PegObservation) -> bool:
@@ -208,6 +207,7 @@ class GraspMonitor:
         self._peg = model.body("peg").id
         self.lost_distance = lost_distance  # peg displacement in the pad frame since the grasp [m]
         self.max_in_hand_tilt = max_in_hand_tilt  # [rad]
+        self._data: mujoco.MjData | None = None
         self.reset()
 
     def reset(self) -> None:
@@ -217,9 +217,16 @@ class GraspMonitor:
 
     def check(self, data: mujoco.MjData, gripper: ControlState, peg: PegObservation) -> None:
         # Plain floats: this runs every control step while the peg is held.
-        r = data.xmat[self._pad].tolist()  # row-major 3x3
-        px, py, pz = data.xpos[self._pad].tolist()
-        gx, gy, gz = data.xpos[self._peg].tolist()
+        if data is not self._data:  # views into data's arrays, fixed for its lifetime
+            self._data = data
+            self._pad_xmat, self._pad_xpos, self._peg_xpos = (
+                data.xmat[self._pad],
+                data.xpos[self._pad],
+                data.xpos[self._peg],
+            )
+        r = self._pad_xmat.tolist()  # row-major 3x3
+        px, py, pz = self._pad_xpos.tolist()
+        gx, gy, gz = self._peg_xpos.tolist()
         dx, dy, dz = gx - px, gy - py, gz - pz
         ax, ay, az = peg.axis_world.tolist()
         # R^T d and R^T axis: the peg's offset and axis in the pad frame
@@ -262,25 +269,32 @@ class DivergenceMonitor:
     """
 
     def __init__(self) -> None:
-        self._warnings0 = np.zeros(len(mujoco.mjtWarning.__members__) - 1, dtype=np.int64)
+        self._warnings0 = [0] * (len(mujoco.mjtWarning.__members__) - 1)
+        self._data: mujoco.MjData | None = None
 
     def reset(self, data: mujoco.MjData) -> None:
-        self._warnings0 = data.warning.number.copy()
+        self._warnings0 = data.warning.number.tolist()
 
     def check(self, data: mujoco.MjData, t_start: float) -> None:
         """Raise :class:`EpisodeFailure` ``diverged`` if a step since ``t_start`` [s] (the time
         at the start of the control period) went bad."""
-        number = data.warning.number
+        if data is not self._data:  # views into data's arrays, fixed for its lifetime
+            self._data = data
+            self._number, self._qpos, self._qvel = data.warning.number, data.qpos, data.qvel
+        number = self._number
         if data.time < t_start:
             raise EpisodeFailure(
                 "diverged",
                 f"MuJoCo reset the simulation after a bad state (time went back from {t_start:.4f} s "
                 f"to {data.time:.4f} s){_warning_text(data, number.nonzero()[0])}",
             )
-        changed = (number != self._warnings0).nonzero()[0]
-        if len(changed):
+        if number.tolist() != self._warnings0:
+            changed = (number != np.array(self._warnings0)).nonzero()[0]
             raise EpisodeFailure("diverged", _warning_text(data, changed).removeprefix(": "))
-        if not math.isfinite(float(data.qpos.sum() + data.qvel.sum())):
+        # Python's sum flags what numpy's did: no MuJoCo warning (checked above) means every
+        # step started with |qpos|, |qvel| <= 1e10, and one step of a finite acceleration
+        # cannot take a finite state near the overflow where the two orders of summing differ.
+        if not math.isfinite(sum(self._qpos.tolist()) + sum(self._qvel.tolist())):
             raise EpisodeFailure("diverged", f"non-finite state at t={data.time:.4f} s")
 
 
@@ -352,21 +366,33 @@ class ContactHistory:
         self.travel = 0.0
         self._xy = (0.0, 0.0)
 
-    def update(self, t: float, dt: float, force_block: NDArray[np.float64], peg: PegObservation) -> None:
+    def update(self, t: float, dt: float, force_block: Sequence[float], peg: PegObservation) -> None:
         """``force_block`` [N]: the peg-block force of each physics step (``dt`` [s] apart) of the
         control period that ended at ``t`` [s]; ``peg`` as observed at ``t``."""
-        x, y = float(peg.bottom_world[0]), float(peg.bottom_world[1])
+        x, y = peg.bottom_world[:2].tolist()
         if self.first_contact is None:
-            if float(force_block.max()) <= self.threshold:
+            threshold = self.threshold
+            touching = next((i for i, f in enumerate(force_block) if f > threshold), None)
+            if touching is None:
                 return
-            touching = np.flatnonzero(force_block > self.threshold)
-            self.first_contact = t - (len(force_block) - 1 - int(touching[0])) * dt
-            self.impulse += float(force_block[touching[0] :].sum()) * dt
+            self.first_contact = t - (len(force_block) - 1 - touching) * dt
+            self.impulse += _sum(force_block[touching:]) * dt
             self._xy = (x, y)
         else:
-            self.impulse += float(force_block.sum()) * dt
+            self.impulse += _sum(force_block) * dt
         self.max_tilt = max(self.max_tilt, math.acos(min(1.0, abs(float(peg.axis_world[2])))))
         moved = math.hypot(x - self._xy[0], y - self._xy[1])
         if moved >= TRAVEL_STEP:
             self.travel += moved
             self._xy = (x, y)
+
+
+def _sum(values: Sequence[float]) -> float:
+    """``numpy.sum`` of a few floats, in its order: one by one below 8 terms (pairwise beyond,
+    left to numpy), so the impulse is the same number to the last bit whichever computes it."""
+    if len(values) >= 8:
+        return float(np.sum(values))
+    total = 0.0
+    for v in values:
+        total += v
+    return total

@@ -17,6 +17,11 @@ Method (``peg-sim bench``):
   included).
 
 Overhead = loop time / replay time - 1, the median of the paired ratios of the repetitions.
+Efficiency = replay time / loop time (the share of the loop's time that is physics), and the
+loop's own work per control step = (loop time - replay time) per control step - the controller's
+compute (from the timed run): everything the loop adds to the physics and the control law
+(task, monitors, sensors, observations, recording, the phantom-contact guard, bookkeeping);
+each the median over the repetitions of its paired value.
 """
 
 from __future__ import annotations
@@ -147,7 +152,13 @@ class _Timings:
         loop_us = [c / n * 1e6 for c, n in zip(self.loop_cpu, self.steps, strict=True)]
         raw_us = [c / n * 1e6 for c, n in zip(self.raw_cpu, self.steps, strict=True)]
         ratios = [a / b - 1.0 for a, b in zip(self.loop_cpu, self.raw_cpu, strict=True)]
+        efficiency = [b / a for a, b in zip(self.loop_cpu, self.raw_cpu, strict=True)]
         components = {name: statistics.median(s[name] for s in self.sections) for name in LoopTimer.SECTIONS}
+        # The loop's own work per control step: what it adds to the raw physics, less the control law.
+        own = [
+            (lp - raw - s["controller"]) * k
+            for lp, raw, s in zip(loop_us, raw_us, self.sections, strict=True)
+        ]
         walls = zip(self.loop_wall, self.raw_wall, strict=True)
         return {
             "physics_steps": statistics.median(self.steps),
@@ -161,6 +172,8 @@ class _Timings:
                 "of_minimums": min(loop_us) / min(raw_us) - 1.0,
             },
             "wall_overhead_median": statistics.median(a / b - 1.0 for a, b in walls),
+            "efficiency": statistics.median(efficiency),
+            "loop_own_us_per_control_step": statistics.median(own),
             # Per physics step, from the timed runs: sections of the loop (physics = the in-loop
             # physics steps with their sensor copies).
             "components_us_per_step": components,

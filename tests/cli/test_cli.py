@@ -68,6 +68,7 @@ def test_bench_writes_json(tmp_path: Path) -> None:
     assert entry["loop_us_per_step"]["median"] > entry["raw_us_per_step"]["min"]
     assert set(entry["components_us_per_step"]) == {"task", "controller", "physics", "monitors", "recording"}
     assert all(v > 0 for v in entry["components_us_per_step"].values())
+    assert 0 < entry["efficiency"] <= 1 and entry["loop_own_us_per_control_step"] > 0
     assert "CPU time" in result["clock"] and result["throughput"] == []
 
 
@@ -280,6 +281,8 @@ def _bench_entry(overhead: float) -> dict:
             ("task", "controller", "physics", "monitors", "recording"), 1.0
         ),
         "within_target": overhead <= 0.10,
+        "efficiency": 1.0 / (1.0 + overhead),
+        "loop_own_us_per_control_step": 50.0,
     }
 
 
@@ -302,6 +305,8 @@ def test_bench_says_what_its_overhead_and_target_are(
     out = capsys.readouterr().out
     assert f"overhead {100 * overhead:+5.1f} %" in out
     assert ("> 10 % target" in out) is flagged
+    assert f"efficiency {1.0 / (1.0 + overhead):.2f} (raw physics / loop)" in out
+    assert "the loop's own work  50.0 us per control step" in out
     # What the overhead is measured against, what the target is, and why a shared machine misses it.
     assert "bare mj_step replay of the same controls" in out
     assert "target: median <= 10 % (b.json: within_target)" in out

@@ -166,3 +166,91 @@ def test_without_a_phantom_the_guarded_step_is_the_plain_one(model: mujoco.MjMod
 def test_rk4_cannot_be_guarded() -> None:
     with pytest.raises(ValueError, match="RK4"):
         PhantomGuard(build_model(SceneConfig(), "seed"), 1e-4)
+
+
+def _period(model: mujoco.MjModel, data: mujoco.MjData, guard: PhantomGuard, n: int) -> bool:
+    """A control period as the loop runs it: plain steps checked afterwards, rerun guarded if
+    the check says so; whether it was rerun."""
+    rows = np.zeros((n, model.nsensordata))
+    guard.begin(model, data)
+    for i in range(n):
+        mujoco.mj_step(model, data)
+        rows[i] = data.sensordata
+    rerun = guard.end(model, data, rows)
+    assert model.opt.disableflags == 0  # the auto-reset is back
+    if rerun:
+        for _ in range(n):
+            guard.step(model, data)
+    return rerun
+
+
+def _same(a: mujoco.MjData, b: mujoco.MjData) -> bool:
+    return (
+        a.time == b.time
+        and np.array_equal(a.qpos, b.qpos)
+        and np.array_equal(a.qvel, b.qvel)
+        and np.array_equal(a.sensordata, b.sensordata)
+        and np.array_equal(a.warning.number, b.warning.number)
+    )
+
+
+def test_a_period_checked_afterwards_sees_the_phantom_and_is_the_guarded_one(model: mujoco.MjModel) -> None:
+    """The peg-block sensor shows the phantom of a plain step; the period is rerun guarded and
+    ends exactly where stepping it guarded ends."""
+    data = _at_the_state(model)
+    mujoco.mj_forward(model, data)
+    if -_deepest_peg_block(model, data) <= PRECISION.phantom_depth:
+        pytest.skip(f"MuJoCo {mujoco.__version__}'s collider returns no phantom at this state")
+    exact, checked = _at_the_state(model), _at_the_state(model)
+    guard_exact, guard = (
+        PhantomGuard(model, PRECISION.phantom_depth),
+        PhantomGuard(model, PRECISION.phantom_depth),
+    )
+    assert guard.sensor is not None
+    for _ in range(3):
+        guard_exact.step(model, exact)
+    assert _period(model, checked, guard, 3)
+    assert guard.count == guard_exact.count == 1 and _same(checked, exact)
+
+
+def test_periods_without_a_phantom_are_the_guarded_steps(model: mujoco.MjModel) -> None:
+    exact, checked = mujoco.MjData(model), mujoco.MjData(model)
+    for data in (exact, checked):
+        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    guard_exact, guard = (
+        PhantomGuard(model, PRECISION.phantom_depth),
+        PhantomGuard(model, PRECISION.phantom_depth),
+    )
+    rng = np.random.default_rng(0)
+    for _ in range(250):
+        u = rng.normal(0.0, 3.0, model.nu)
+        exact.ctrl[:] = u
+        checked.ctrl[:] = u
+        for _ in range(2):
+            guard_exact.step(model, exact)
+        assert not _period(model, checked, guard, 2)
+    assert guard.count == 0 and _same(checked, exact)
+
+
+@pytest.mark.parametrize("bad", ["ctrl", "qvel"])
+def test_a_period_that_goes_bad_is_rerun_from_its_start(model: mujoco.MjModel, bad: str) -> None:
+    """A bad control (a warning) or a velocity over MuJoCo's limit (a warning and, with the
+    auto-reset, a reset) in a period: it is put back to its start, warnings included, and rerun
+    guarded: the warnings and the state are those of stepping it guarded."""
+    exact, checked = mujoco.MjData(model), mujoco.MjData(model)
+    for data in (exact, checked):
+        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+        data.time = 1.0
+        if bad == "ctrl":
+            data.ctrl[0] = np.nan
+        else:
+            data.qvel[0] = 1e11
+    guard_exact, guard = (
+        PhantomGuard(model, PRECISION.phantom_depth),
+        PhantomGuard(model, PRECISION.phantom_depth),
+    )
+    for _ in range(2):
+        guard_exact.step(model, exact)
+    assert _period(model, checked, guard, 2)
+    assert exact.warning.number.any() and _same(checked, exact)
+    assert (exact.time < 1.0) is (bad == "qvel")  # the reset

@@ -149,3 +149,24 @@ def test_a_restarted_axis_has_no_correction_and_a_wrong_latency_a_bounded_one() 
 def test_the_predictor_checks_its_shapes() -> None:
     with pytest.raises(ValueError, match=r"alpha \(2,\) and stiffness \(3,\) differ in shape"):
         WrenchPredictor(stiffness=np.ones(3), latency=0.01, dt=0.001, alpha=np.ones(2))
+
+
+def test_the_wrench_in_floats_is_the_array_formula_to_the_bit(model: mujoco.MjModel) -> None:
+    """WristModel.contact_wrench runs in plain floats; the numbers are the array formula's."""
+    from peg_ctrl.sim.rotations import cross, rotate
+    from peg_ctrl.sim.state import ControlState, ft_world
+
+    wrist = WristModel(model)
+    rng = np.random.default_rng(4)
+    for _ in range(500):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        ft, centre, accel = rng.normal(size=6) * 5.0, rng.normal(size=3) * 0.05, rng.normal(size=3)
+        state = ControlState(0.0, np.zeros(3), q, np.zeros(3), np.zeros(3), 0.085, ft)
+        f_world, t_world = ft_world(state)
+        inertia = wrist.mass * (accel - wrist.gravity)
+        f_ext = inertia - f_world
+        site, com, c = rotate(q, wrist.site_body), rotate(q, wrist.com_body), rotate(q, centre)
+        tau = -t_world + cross(com - site, inertia) + cross(site - c, f_ext)
+        f, t = wrist.contact_wrench(state, centre, accel)
+        assert f.tobytes() == f_ext.tobytes() and t.tobytes() == tau.tobytes()

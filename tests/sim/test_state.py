@@ -58,3 +58,68 @@ def test_grip_is_the_pads_squeeze_that_the_net_force_cancels() -> None:
     assert np.all(grip > 10.0)
     assert np.allclose(net, weight, rtol=0.2)  # the net force carries the weight, nothing more
     assert loop.sensors.forces(loop.sensors.raw)[:, BLOCK_PEG].max() == 0.0
+
+
+def _contacts_with_arrays(reader: StateReader, data: mujoco.MjData) -> list[tuple]:
+    """The per-pair contact sums as the arrays compute them (the reference for contacts())."""
+    from peg_ctrl.sim.state import BODY_GROUPS
+
+    model, sums = reader.model, {}
+    wrench = np.zeros(6)
+    for i in range(data.ncon):
+        con = data.contact[i]
+        if con.efc_address < 0:
+            continue
+        group = reader._body_group
+        g1 = BODY_GROUPS[group[model.geom_bodyid[con.geom1]]]
+        g2 = BODY_GROUPS[group[model.geom_bodyid[con.geom2]]]
+        if g1 == g2:
+            continue
+        mujoco.mj_contactForce(model, data, i, wrench)
+        f_world = con.frame.reshape(3, 3).T @ wrench[:3]
+        pair, f = ((g1, g2), -f_world) if g1 < g2 else ((g2, g1), f_world)
+        entry = sums.setdefault(pair, [np.zeros(3), np.zeros(3), 0.0, 0, 0.0])
+        mag = float(np.linalg.norm(f))
+        entry[0] += f
+        entry[1] += mag * con.pos
+        entry[2] += mag
+        entry[3] += 1
+        entry[4] = max(entry[4], con.includemargin - float(con.dist))
+    return [
+        (pair, f.tobytes(), float(np.linalg.norm(f)), (p / total).tobytes(), n, max(pen, 0.0))
+        for pair, (f, p, total, n, pen) in sorted(sums.items())
+        if total >= reader.contact_threshold_n
+    ]
+
+
+def test_contacts_and_the_sensor_reduction_are_the_arrays_to_the_bit() -> None:
+    """The held peg pressed onto the block: the plain-float contacts() and SensorBlock.reduce()
+    give the very numbers the array code gives."""
+    from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
+
+    cfg = {"task": {"name": "held_insertion", "strategy": "force"}, "physics": {"profile": "precision"}}
+    loop = build_loop(episode_config_from_mapping(cfg))
+    loop.reset(np.random.default_rng(0))
+    sensors, touched = loop.sensors, 0
+    for _ in range(1200):
+        loop.step()
+        forces, pens = sensors.reduce()
+        block = sensors.block_force
+        assert (forces, pens) == sensors._reduce_arrays() and block == sensors.block_force
+        contacts = [
+            (
+                c.pair,
+                c.force_world.tobytes(),
+                c.magnitude,
+                c.position_world.tobytes(),
+                c.count,
+                c.max_penetration_m,
+            )
+            for c in loop.reader.contacts(loop.data)
+        ]
+        assert contacts == _contacts_with_arrays(loop.reader, loop.data)
+        touched += block[-1] > 0.0 and pens[0] > 0.0
+    assert touched > 100  # the peg pressed on the block for a good part of it
+    sensors.raw[0, 0] = np.nan  # a diverging step: numpy's NaN propagation, kept
+    forces, pens = sensors.reduce()
+    assert all(np.isnan(forces)) and np.array_equal(forces, sensors._reduce_arrays()[0], equal_nan=True)

@@ -54,19 +54,18 @@ class Pressing:
     def __init__(self, at: Waypoint, force: float, axes: tuple[bool, ...] | None = None) -> None:
         self._at = at
         self._axes = axes
+        self._push = math.nan  # the push of the target built last [N]
         self.set_force(force)
 
     def set_force(self, force: float) -> None:
         # A force of exactly 0 would hand z back to position control: keep a token push.
+        push = max(force, 1e-3)
+        if push == self._push:  # the target already built (targets are immutable): most steps
+            return
+        self._push = push
         at = self._at
         self._target = GripperTarget.trusted(
-            at.p_world,
-            at.quat_world,
-            np.zeros(3),
-            np.zeros(3),
-            0.0,
-            down(max(force, 1e-3)),
-            wrench_axes=self._axes,
+            at.p_world, at.quat_world, np.zeros(3), np.zeros(3), 0.0, down(push), wrench_axes=self._axes
         )
 
     def sample(self, t: float) -> GripperTarget:
