@@ -57,7 +57,7 @@ def test_example_runs(where: str, code: str, tmp_path: Path, monkeypatch: pytest
 ROOT = DOCS.parent
 HELD_INSERTION = DOCS / "demo" / "held_insertion.yaml"
 # The row of the featured comparison it reproduces: mpc/align, friction 0.3, 1 mm, no tilt, seed 0.
-HELD_INSERTION_KEY = "4dc35aa9057b3bfc"
+HELD_INSERTION_KEY = "b907412d12c26b44"
 
 
 def _contact_hard_row(key: str) -> dict[str, str]:
