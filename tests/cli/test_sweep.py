@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
@@ -12,11 +13,15 @@ from pathlib import Path
 import pytest
 
 from peg_ctrl.cli import main, sweep
+from peg_ctrl.cli.sweep import _about
 from peg_ctrl.experiments.config import expand, load_experiment
+from peg_ctrl.experiments.estimate import EPISODE_OVERHEAD_S
 from peg_ctrl.experiments.runner import experiment_text
 from peg_ctrl.progress import ENV_VAR
 
 from ..conftest import assert_one_line_error, peg_sim
+
+ROOT = Path(__file__).resolve().parents[2]
 
 # Three 10-step episodes: a sweep of them is over in seconds.
 TINY = """\
@@ -96,13 +101,23 @@ def test_dry_run_prints_the_breakdown_and_an_estimate_and_writes_nothing(
     assert "    task.tilt_error (2): 0, 0.0349066\n" in out
     assert "  seeds (5): 0..4\n" in out
     assert "runs/contact_hard does not exist yet; 400 to run" in out
-    # The committed run of contact_hard took 2139 s (36 min) of episodes on 2 workers.
-    assert re.search(
-        r"^estimated wall time with 2 workers: 36 min \(at most \d+ min if every episode", out, re.M
+    # The estimate is the committed run's own time: its episodes' wall time over 2 workers.
+    with open(ROOT / "docs" / "contact_hard" / "episodes.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    measured = (sum(float(r["wall_time_s"]) for r in rows) + EPISODE_OVERHEAD_S * len(rows)) / 2
+    total = re.search(
+        r"^estimated wall time with 2 workers: (\S+ \S+) \(at most (\S+ \S+) if every", out, re.M
     )
-    assert (
-        "    pd           held_insertion/precision: 120 x 0.65 x 11.1 s (20 s) = 15 min; contact_hard" in out
+    assert total is not None and total[1] == _about(measured) and total[1] != total[2]
+    pd = re.search(
+        r"^    pd +held_insertion/precision: 120 x ([\d.]+) x ([\d.]+) s \(20 s\) = (\S+ \S+); contact_hard$",
+        out,
+        re.M,
     )
+    assert pd is not None
+    pd_rows = [r for r in rows if r["controller"] == "pd"]
+    sim_s = sum(float(r["sim_time_s"]) for r in pd_rows) / len(pd_rows)
+    assert float(pd[2]) == pytest.approx(sim_s, rel=0.01)
     assert "contact_hard: the committed contact_hard sweep (docs/contact_hard/episodes.csv" in out
     assert out.endswith("dry run: nothing written\n")
     assert list(tmp_path.iterdir()) == []
