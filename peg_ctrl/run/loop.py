@@ -351,7 +351,7 @@ class Loop:
         assert self.peg is not None, "reset() first"
         t0 = clock()
         state = self.sensed()
-        target = self.task.target(Observation(float(data.time), state, self.peg))
+        target = self.task.target(Observation(data.time, state, self.peg))
         t1 = clock()
         out = self._compute(state, target)
         t2 = clock()
@@ -364,7 +364,7 @@ class Loop:
         t5 = clock()
         info = StepInfo(
             self.steps,
-            float(data.time),
+            data.time,
             self.task.phase,
             state,
             target,
@@ -447,7 +447,7 @@ class Loop:
     def _evaluate(self, state: ControlState) -> EpisodeFailure | None:
         assert self.peg is not None
         try:
-            self.last = self.task.evaluate(Observation(float(self.data.time), state, self.peg))
+            self.last = self.task.evaluate(Observation(self.data.time, state, self.peg))
         except EpisodeFailure as exc:
             return exc
         return None

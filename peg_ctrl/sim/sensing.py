@@ -305,12 +305,11 @@ class WristSensor:
         v = state.v_world.tolist()
         if self._v_prev is not None:
             a, dt, (p0, p1, p2) = self._a_accel, self.dt, self._v_prev
-            x0, x1, x2 = self.accel.tolist()
-            self.accel[:] = (
-                x0 + a * ((v[0] - p0) / dt - x0),
-                x1 + a * ((v[1] - p1) / dt - x1),
-                x2 + a * ((v[2] - p2) / dt - x2),
-            )
+            accel = self.accel
+            x0, x1, x2 = accel.tolist()
+            accel[0] = x0 + a * ((v[0] - p0) / dt - x0)
+            accel[1] = x1 + a * ((v[1] - p1) / dt - x1)
+            accel[2] = x2 + a * ((v[2] - p2) / dt - x2)
         self._v_prev = (v[0], v[1], v[2])
 
     def move_centre(self, centre_body: _Vec, state: ControlState) -> None:
@@ -339,16 +338,21 @@ def _frozen(value: _Vec) -> _Vec:
     return out
 
 
+# (3,) arrays written element by element: a third of the cost of a slice assignment.
 def _follow(x: _Vec, alpha: float, target: Floats3) -> None:
     """One step of a first-order low-pass, in place: ``x += alpha * (target - x)``."""
     x0, x1, x2 = x.tolist()
-    x[:] = (x0 + alpha * (target[0] - x0), x1 + alpha * (target[1] - x1), x2 + alpha * (target[2] - x2))
+    x[0], x[1], x[2] = (
+        x0 + alpha * (target[0] - x0),
+        x1 + alpha * (target[1] - x1),
+        x2 + alpha * (target[2] - x2),
+    )
 
 
 def _add_scaled(x: _Vec, alpha: float, v: Floats3) -> None:
     """``x += alpha * v`` in place."""
     x0, x1, x2 = x.tolist()
-    x[:] = (x0 + alpha * v[0], x1 + alpha * v[1], x2 + alpha * v[2])
+    x[0], x[1], x[2] = x0 + alpha * v[0], x1 + alpha * v[1], x2 + alpha * v[2]
 
 
 class WrenchPredictor:

@@ -19,6 +19,7 @@ from peg_ctrl.tasks.phases import Motion
 __all__ = ["Guided", "Hold", "Pressing", "Pressed", "Spiral", "Slide", "down", "about"]
 
 _Vec = NDArray[np.float64]
+_ZERO = (0.0, 0.0, 0.0)
 
 
 def down(force: float) -> _Vec:
@@ -110,16 +111,20 @@ class Spiral:
         self.speed = speed
         self.duration = 0.0  # open-ended: the phase's guard or time budget ends it
         self._force = down(force)
+        self._centre = self.centre.astype(float).tolist()
 
     def sample(self, t: float) -> GripperTarget:
-        # Arc length s = a theta^2 / 2 (to first order) at constant speed.
-        theta = math.sqrt(2.0 * self.speed * max(t, 0.0) / self.a)
-        r = self.a * theta
+        # Arc length s = a theta^2 / 2 (to first order) at constant speed. Plain floats (every
+        # control step), the arithmetic of centre + [r c, r s, 0] and [...] * rate.
+        a = self.a
+        theta = math.sqrt(2.0 * self.speed * max(t, 0.0) / a)
+        r = a * theta
         c, s = math.cos(theta), math.sin(theta)
-        p = self.centre + np.array([r * c, r * s, 0.0])
-        rate = self.speed / math.sqrt(self.a * self.a + r * r)  # d theta / dt
-        v = np.array([self.a * c - r * s, self.a * s + r * c, 0.0]) * rate
-        return GripperTarget.trusted(p, self.quat, v, np.zeros(3), 0.0, self._force)
+        cx, cy, cz = self._centre
+        p = (cx + r * c, cy + r * s, cz + 0.0)
+        rate = self.speed / math.sqrt(a * a + r * r)  # d theta / dt
+        v = ((a * c - r * s) * rate, (a * s + r * c) * rate, 0.0 * rate)
+        return GripperTarget.trusted(p, self.quat, v, _ZERO, 0.0, self._force)
 
 
 class Slide:
