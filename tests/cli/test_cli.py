@@ -376,7 +376,10 @@ def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str])
         "guarded",
         "quick",
     ]
-    assert lines[7].split(None, 1)[1] == "Every controller on the default task, 20 randomized seeds each."
+    assert (
+        lines[names.index("quick")].split(None, 1)[1]
+        == "Every controller on the default task, 20 randomized seeds each."
+    )
 
 
 def test_sweep_resolves_a_shipped_name_unless_a_file_exists(
