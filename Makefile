@@ -8,6 +8,10 @@ OUT    ?= runs/demo
 # torch for the RL example (stable-baselines3): a CPU build, installed before the package so that
 # pip does not resolve SB3's bare `torch` to a CUDA build of several GB. Override: make TORCH=...
 TORCH  ?= torch==2.13.0
+# Test processes (pytest-xdist): one per core, at most 4. Override: make test WORKERS=1
+WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); echo $$(( n < 4 ? n : 4 )))
+# Each test module runs in one process: its module fixtures (episodes, sweeps) are made once.
+PYTEST := $(BIN)/python -m pytest -q -n $(WORKERS) --dist loadscope
 # A non-editable copy of the package for mypy (see lint).
 TYPECHECK := $(VENV)/typecheck
 # Files not ignored by .gitignore that differ from the last commit (nothing outside git).
@@ -53,14 +57,14 @@ apt:
 ## tests left no file behind in the repository (git status unchanged)
 test: $(STAMP) sysdeps-test lint
 	@$(GIT_STATUS) > $(VENV)/git-status.before
-	$(BIN)/python -m pytest -q
+	$(PYTEST)
 	@$(GIT_STATUS) > $(VENV)/git-status.after
 	@diff -u $(VENV)/git-status.before $(VENV)/git-status.after \
 	  || { echo "error: the tests created, changed or deleted the files above" >&2; exit 1; }
 
 ## test-slow: the long physics runs only
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -m slow
+	$(PYTEST) -m slow
 
 ## lint: ruff, then mypy on a non-editable copy. The editable install maps peg_ctrl.controllers
 ## (and planners, experiments) from the top-level folders with an import hook that mypy cannot

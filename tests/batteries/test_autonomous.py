@@ -27,7 +27,9 @@ def test_fifty_randomized_episodes(planner: str, tmp_path: Path, record_property
         r["seed"]: (r["reason"], r["phase"], r["detail"]) for r in results if r["status"] != "success"
     }
     record_property("success_rate", len(successes) / len(results))
-    record_property("median_time_to_insert_s", statistics.median(r["time_to_insert_s"] for r in successes))
+    record_property(
+        "median_time_to_insert_s", float(statistics.median(r["time_to_insert_s"] for r in successes))
+    )
     assert len(successes) >= 48, failures
     for r in results:
         assert r["reason"] != "diverged", r

@@ -26,6 +26,6 @@ def test_thirty_randomized_episodes(name: str, tmp_path: Path, record_property) 
     results = run_batch(jobs, progress=False)
     wins = sum(r["status"] == "success" for r in results)
     record_property("success_rate", wins / len(results))
-    record_property("peak_contact_force_n_max", max(r["peak_contact_force_n"] for r in results))
+    record_property("peak_contact_force_n_max", float(max(r["peak_contact_force_n"] for r in results)))
     assert wins >= 27, {r["seed"]: (r["reason"], r["phase"]) for r in results if r["status"] != "success"}
     assert all(r["reason"] != "diverged" for r in results)

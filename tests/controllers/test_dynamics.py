@@ -7,19 +7,29 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import pytest
 
 from peg_ctrl.controllers.dynamics import BaseDynamics, robot_mjcf, to_pinocchio_q
 from peg_ctrl.controllers.impedance import ImpedanceController
 
 
-def _robot_dirs() -> set[str]:
-    return {p.name for p in Path(tempfile.gettempdir()).glob("peg_ctrl_robot_*")}
+def test_building_a_controller_leaves_no_temporary_files(
+    model: mujoco.MjModel, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Temporary files go to this test's directory, where no other test (running at the same time
+    # in another process) makes any.
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    made = []
+    real = tempfile.TemporaryDirectory
 
+    def recorded(*args, **kwargs):  # type: ignore[no-untyped-def]
+        made.append(kwargs.get("prefix"))
+        return real(*args, **kwargs)
 
-def test_building_a_controller_leaves_no_temporary_files(model: mujoco.MjModel) -> None:
-    before = _robot_dirs()
+    monkeypatch.setattr(tempfile, "TemporaryDirectory", recorded)
     ImpedanceController(model)
-    assert _robot_dirs() - before == set()
+    assert made == ["peg_ctrl_robot_"]  # the robot's model was written to a temporary directory
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_to_pinocchio_q_reorders_the_ball_quaternion() -> None:

@@ -8,9 +8,11 @@ accepted never puts a NaN into the simulation's state.
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import math
 import os
+import shutil
 import tempfile
 import typing
 from pathlib import Path
@@ -29,8 +31,12 @@ from peg_ctrl.errors import FAILURE_REASONS, EpisodeFailure, PegCtrlError
 from peg_ctrl.run.episode import EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.tasks import TASKS
 
-# Hypothesis keeps caches in ./.hypothesis; not in the repository.
-set_hypothesis_home_dir(Path(tempfile.gettempdir()) / "peg_ctrl-hypothesis")
+# Hypothesis keeps caches in ./.hypothesis: instead in a directory of this test process's, neither
+# in the repository nor shared with tests running at the same time (other test processes, other
+# checkouts); removed at exit.
+_HYPOTHESIS_HOME = tempfile.mkdtemp(prefix="peg_ctrl-hypothesis-")
+atexit.register(shutil.rmtree, _HYPOTHESIS_HOME, ignore_errors=True)
+set_hypothesis_home_dir(_HYPOTHESIS_HOME)
 
 #: ``PEG_CTRL_FUZZ_SCALE=10`` runs ten times the examples (the closing battery of a fault pass).
 SCALE = int(os.environ.get("PEG_CTRL_FUZZ_SCALE", "1"))

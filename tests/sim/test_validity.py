@@ -38,7 +38,7 @@ ENTRY_LIMIT = 0.001  # an interference fit may not enter beyond this [m]
 @pytest.mark.parametrize("clearance", [pytest.param(c, id=f"{c * 1e3:+.2f}mm") for c in CLEARANCES])
 def test_aligned_push_inserts_only_with_clearance(clearance: float, record_property) -> None:
     r = held_push(PushCase(clearance=clearance), PROFILE)
-    record_property("depth_mm", r.depth * 1e3)
+    record_property("depth_mm", float(r.depth * 1e3))
     if clearance > 0:
         assert r.depth >= INSERTED_DEPTH, (
             f"{clearance * 1e3:.2f} mm clearance: only {r.depth * 1e3:.2f} mm deep"
@@ -92,8 +92,8 @@ def test_chamfer_capture_range(case: PushCase, captured: bool) -> None:
 )
 def test_tilt_wedges_at_the_geometric_depth(case: PushCase, geometric: float, record_property) -> None:
     r = held_push(case, PROFILE)
-    record_property("depth_mm", r.depth * 1e3)
-    record_property("geometric_mm", geometric * 1e3)
+    record_property("depth_mm", float(r.depth * 1e3))
+    record_property("geometric_mm", float(geometric * 1e3))
     if geometric > case.assets().block_size[2]:
         assert r.depth >= INSERTED_DEPTH
     else:
