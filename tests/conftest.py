@@ -82,6 +82,107 @@ def peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
 
 
+def peg_sim_here(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``peg-sim ARGV`` run in ``cwd`` by this interpreter (:func:`peg_ctrl.cli.main`, which the
+    console script calls), as :func:`peg_sim` reports it: without a fresh interpreter's second of
+    start-up, for the many argument and config errors. Each kind of error is also checked once
+    through :func:`peg_sim`."""
+    import contextlib
+    import io
+
+    from peg_ctrl.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(argv)
+            except SystemExit as exc:  # argparse: --help, or an argument error
+                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["peg-sim", *argv], code, out.getvalue(), err.getvalue())
+
+
+# Imports each snippet in a fork of a process that has loaded the heavy libraries the package
+# uses but no module of the package: its first import there, in a tenth of the time a fresh
+# interpreter takes. Protocol: a JSON line [code, cwd, log] in, the exit code out; the child's
+# stdout and stderr go to the file ``log``.
+_FORK_SERVER = """
+import json, os, sys, traceback
+for name in sys.argv[1:]:
+    __import__(name)
+assert not [m for m in sys.modules if m.split(".")[0] == "peg_ctrl"], "preloaded the package"
+print("ready", flush=True)
+for line in sys.stdin:
+    code, cwd, log = json.loads(line)
+    pid = os.fork()
+    if pid == 0:
+        status = 0
+        try:
+            fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+            os.dup2(fd, 1)
+            os.dup2(fd, 2)
+            os.chdir(cwd)
+            exec(compile(code, "<first import>", "exec"), {"__name__": "__main__"})
+        except BaseException:
+            traceback.print_exc()
+            status = 1
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), flush=True)
+"""
+#: The libraries the package's modules import at their top (a library missing here only costs time).
+PRELOADED = ("numpy", "scipy.linalg", "scipy.sparse", "mujoco", "gymnasium", "qpsolvers", "ruckig")
+
+
+class FirstImports:
+    """Runs code in a fresh fork of a process that has imported :data:`PRELOADED` and nothing of
+    peg_ctrl, so that an import in it is the package's first: an import cycle shows, as in a
+    fresh interpreter. (A module that uses a submodule of those libraries without importing it
+    would pass here: ``tests/test_packaging.py`` imports every module in a fresh interpreter too,
+    among the slow tests.)"""
+
+    def __init__(self, logs: Path) -> None:
+        self._logs = logs
+        self._count = 0
+        self._proc = subprocess.Popen(
+            [sys.executable, "-c", _FORK_SERVER, *PRELOADED],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self._proc.stdout is not None and self._proc.stdout.readline() == "ready\n"
+
+    def run(self, code: str, *, cwd: Path) -> subprocess.CompletedProcess[str]:
+        """``python -c CODE`` in ``cwd``, forked: its exit code, and its stdout and stderr as stderr."""
+        import json
+
+        assert self._proc.stdin is not None and self._proc.stdout is not None
+        self._count += 1
+        log = self._logs / f"{self._count}.txt"
+        self._proc.stdin.write(json.dumps([code, str(cwd), str(log)]) + "\n")
+        self._proc.stdin.flush()
+        code_out = int(self._proc.stdout.readline())
+        return subprocess.CompletedProcess(["-c", code], code_out, "", log.read_text())
+
+    def close(self) -> None:
+        assert self._proc.stdin is not None
+        self._proc.stdin.close()
+        self._proc.wait(timeout=60)
+
+
+@pytest.fixture(scope="session")
+def first_imports(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FirstImports]:
+    """A :class:`FirstImports` for the session (one per test worker)."""
+    server = FirstImports(tmp_path_factory.mktemp("first-imports"))
+    yield server
+    server.close()
+
+
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) -> None:
     """A user or OS mistake: exit 2 and one ``peg-sim: error: ...`` line containing ``message``."""
     assert proc.returncode == 2, proc.stderr

@@ -27,13 +27,24 @@ def _examples() -> list[tuple[str, str]]:
 
 
 EXAMPLES = _examples()
+# Examples that run for long, by what they call: a sweep of four whole episodes (the sweeps of
+# tests/experiments run in the default suite) and PPO training (tests/experiments/test_rl.py).
+SLOW_CALLS = ("run_sweep(", "PPO(")
 
 
 def test_every_page_has_examples() -> None:
     assert len(EXAMPLES) >= 6
 
 
-@pytest.mark.parametrize(("where", "code"), EXAMPLES, ids=[w for w, _ in EXAMPLES])
+@pytest.mark.parametrize(
+    ("where", "code"),
+    [
+        pytest.param(
+            where, code, id=where, marks=pytest.mark.slow if any(c in code for c in SLOW_CALLS) else ()
+        )
+        for where, code in EXAMPLES
+    ],
+)
 def test_example_runs(where: str, code: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
     # A real module, as a script's would be: dataclasses and type hints look their module up.

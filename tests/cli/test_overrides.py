@@ -13,7 +13,7 @@ import pytest
 from peg_ctrl.config import apply_overrides, parse_value
 from peg_ctrl.errors import ConfigError
 
-from ..conftest import assert_one_line_error, peg_sim
+from ..conftest import assert_one_line_error, peg_sim_here
 
 PRECISION_SETTINGS = ["physics.profile=precision", "scene.assets.clearance=5e-5"]
 
@@ -134,7 +134,7 @@ def exported(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
             "physics: {profile: precision}\nscene:\n  assets: {clearance: 5e-5}\n"
         )
         options = ["--config", "precision.yaml"]
-    proc = peg_sim(["model", "--out", "scene", *options], cwd=work)
+    proc = peg_sim_here(["model", "--out", "scene", *options], cwd=work)
     assert proc.returncode == 0, proc.stderr
     return mujoco.MjModel.from_xml_path(str(work / "scene" / "scene.xml"))
 
@@ -188,7 +188,7 @@ def test_exported_solver_options_are_the_study_ones(
     ],
 )
 def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp_path: Path) -> None:
-    assert_one_line_error(peg_sim(["model", "--out", "X", "--set", item], cwd=tmp_path), message)
+    assert_one_line_error(peg_sim_here(["model", "--out", "X", "--set", item], cwd=tmp_path), message)
     assert not (tmp_path / "X").exists(), "bad input must be rejected before any output is created"
 
 
@@ -219,5 +219,5 @@ def test_bad_model_override_is_one_line_with_exit_2(item: str, message: str, tmp
 def test_bad_run_and_sweep_overrides_are_one_line_with_exit_2(
     argv: list[str], message: str, tmp_path: Path
 ) -> None:
-    assert_one_line_error(peg_sim(argv, cwd=tmp_path), message)
+    assert_one_line_error(peg_sim_here(argv, cwd=tmp_path), message)
     assert not (tmp_path / "X").exists()

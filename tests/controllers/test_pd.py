@@ -127,8 +127,23 @@ def _angle_error(q_d: np.ndarray, q: np.ndarray) -> float:
     return float(np.linalg.norm(err))
 
 
-@pytest.mark.parametrize("axis", [0, 1, 2], ids=["x", "y", "z"])
-@pytest.mark.parametrize("step", [0.1, -0.1])
+# ~2 s of physics each: two in the default suite, every axis and sign with the slow tests.
+FAST_SLIDES = {(0, 0.1), (2, -0.1)}
+
+
+@pytest.mark.parametrize(
+    ("axis", "step"),
+    [
+        pytest.param(
+            axis,
+            step,
+            id=f"{step}-{'xyz'[axis]}",
+            marks=() if (axis, step) in FAST_SLIDES else pytest.mark.slow,
+        )
+        for step in (0.1, -0.1)
+        for axis in (0, 1, 2)
+    ],
+)
 def test_slide_step_response(tracker: Tracker, axis: int, step: float) -> None:
     """10 cm step: within 1 mm by 0.5 s, overshoot <= 0.5 mm, within 0.01 mm at 2 s."""
     goal = HOME.copy()
@@ -159,7 +174,16 @@ ROTATIONS = {
 }
 
 
-@pytest.mark.parametrize("rpy", ROTATIONS.values(), ids=ROTATIONS.keys())
+FAST_ROTATIONS = ("yaw 0.5", "roll 95deg", "pitch 90 + yaw 45")  # ~3 s each; the rest are slow
+
+
+@pytest.mark.parametrize(
+    "rpy",
+    [
+        pytest.param(rpy, id=name, marks=() if name in FAST_ROTATIONS else pytest.mark.slow)
+        for name, rpy in ROTATIONS.items()
+    ],
+)
 def test_rotation_step_response(tracker: Tracker, rpy: tuple[float, float, float]) -> None:
     """Within 0.01 rad by 1.5 s (speed capped at 1.5 rad/s), overshoot <= 0.01 rad, pinch point fixed."""
     q_d = euler_to_quat(*rpy)
@@ -178,7 +202,7 @@ def test_rotation_step_response(tracker: Tracker, rpy: tuple[float, float, float
     assert max(drift) < 2e-3
 
 
-@pytest.mark.parametrize("sign", [1.0, -1.0])
+@pytest.mark.parametrize("sign", [1.0, pytest.param(-1.0, marks=pytest.mark.slow)])  # ~3 s each
 def test_large_rotation_takes_the_short_way(tracker: Tracker, sign: float) -> None:
     """Yaw to +-(pi - 0.05): the yaw angle moves monotonically towards the target's side."""
     goal = sign * (math.pi - 0.05)

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
+from pathlib import Path
 from typing import ClassVar
 
 import mujoco
@@ -24,6 +23,7 @@ from peg_ctrl.controllers import (
 )
 from peg_ctrl.errors import ConfigError, UnknownComponent
 
+from ..conftest import FirstImports
 from .conftest import NAMES
 
 KNOWN = "known: admittance, diffik, impedance, mpc, pd"
@@ -150,7 +150,9 @@ MODULES = ("", ".base", ".pd", ".impedance", ".admittance", ".diffik", ".mpc", "
 
 
 @pytest.mark.parametrize("module", MODULES)
-def test_imports_first_in_a_fresh_interpreter_without_higher_layers(module: str) -> None:
+def test_imports_first_without_higher_layers(
+    module: str, tmp_path: Path, first_imports: FirstImports
+) -> None:
     code = (
         "import sys\n"
         f"import peg_ctrl.controllers{module}\n"
@@ -159,7 +161,7 @@ def test_imports_first_in_a_fresh_interpreter_without_higher_layers(module: str)
         "loaded = sorted(m for m in sys.modules if m.startswith(higher))\n"
         "assert not loaded, loaded\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    result = first_imports.run(code, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
 
 

@@ -18,7 +18,7 @@ from peg_ctrl.experiments.runner import _done, run_sweep
 from peg_ctrl.run.episode import WALL_CLOCK_FIELDS
 from peg_ctrl.tasks.monitors import END_STATES
 
-from ..conftest import sigint_default
+from ..conftest import assert_one_line_error, peg_sim_here, sigint_default
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
 SMALL = """\
@@ -26,7 +26,7 @@ name: small
 controllers: [{name: pd}, {name: impedance, k_pos: [1200.0, 1200.0, 1200.0]}]
 clearances: [0.001]
 seeds: [0, 1]
-max_steps: 4000
+max_steps: 2000
 """
 
 
@@ -79,14 +79,9 @@ def test_shipped_experiments_load() -> None:
 def test_bad_experiment_files_fail_in_one_line(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "bad.yaml"
     path.write_text(text + "\n")
-    proc = subprocess.run(
-        [sys.executable, "-m", "peg_ctrl", "sweep", str(path), "--out", str(tmp_path / "out")],
-        capture_output=True,
-        text=True,
-    )
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("peg-sim: error: ") and message in lines[0], lines
+    proc = peg_sim_here(["sweep", str(path), "--out", str(tmp_path / "out")], cwd=tmp_path)
+    assert_one_line_error(proc, message)
+    assert not (tmp_path / "out").exists()
 
 
 def test_jobs_are_keyed_by_their_full_config() -> None:
@@ -158,7 +153,7 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path: Path) -> None:
     config = tmp_path / "small.yaml"
     config.write_text(SMALL)
     # Uninterrupted, with two workers.
-    run_sweep(load_experiment(config), tmp_path / "whole", workers=2, progress=False)
+    run_sweep(load_experiment(config), tmp_path / "whole", workers=2, progress=False, report=False)
     # Interrupted with Ctrl-C after the first finished episode, then resumed with one worker.
     out = tmp_path / "resumed"
     proc = subprocess.Popen(
@@ -192,16 +187,16 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path: Path) -> None:
 
 def test_a_different_experiment_in_the_same_directory_is_refused(tmp_path: Path) -> None:
     config = tmp_path / "small.yaml"
-    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 100"))
+    config.write_text(SMALL.replace("max_steps: 2000", "max_steps: 100"))
     run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False, report=False)
-    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 101"))
+    config.write_text(SMALL.replace("max_steps: 2000", "max_steps: 101"))
     with pytest.raises(ValueError, match="different experiment"):
         run_sweep(load_experiment(config), tmp_path / "out", workers=1, progress=False)
 
 
 def test_plot_redraws_the_report(tmp_path: Path) -> None:
     config = tmp_path / "small.yaml"
-    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 100"))
+    config.write_text(SMALL.replace("max_steps: 2000", "max_steps: 100"))
     out = tmp_path / "out"
     run_sweep(load_experiment(config), out, workers=1, progress=False, report=False)
     assert not (out / "report.md").exists()
@@ -220,7 +215,7 @@ def test_ray_backend_gives_the_local_results(tmp_path: Path) -> None:
     import ray
 
     config = tmp_path / "small.yaml"
-    config.write_text(SMALL.replace("max_steps: 4000", "max_steps: 600"))
+    config.write_text(SMALL.replace("max_steps: 2000", "max_steps: 200"))
     exp = load_experiment(config)
     run_sweep(exp, tmp_path / "local", workers=2, progress=False, report=False)
     try:
@@ -235,14 +230,10 @@ def test_tuple_gains_with_gain_scale_run_to_a_report(tmp_path: Path) -> None:
     config = tmp_path / "crash.yaml"
     config.write_text(
         "controllers: [{name: impedance, k_pos: [1200, 1200, 1200]}]\n"
-        "domain: {gain_scale: [0.9, 1.1]}\nseeds: 1\nmax_steps: 3000\n"
+        "domain: {gain_scale: [0.9, 1.1]}\nseeds: 1\nmax_steps: 500\n"
     )
     out = tmp_path / "out"
-    proc = subprocess.run(
-        [sys.executable, "-m", "peg_ctrl", "sweep", str(config), "--out", str(out), "--workers", "1"],
-        capture_output=True,
-        text=True,
-    )
+    proc = peg_sim_here(["sweep", str(config), "--out", str(out), "--workers", "1"], cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     (row,) = _rows(out / "episodes.csv")
     assert row["controller"] == "impedance" and float(row["gain_scale"]) != 1.0
@@ -396,8 +387,8 @@ def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path:
             "controllers": ["pd"],
             "strategies": ["straight", "spiral"],
             "clearances": [0.0001],
-            "seeds": 2,
-            "max_steps": 6000,
+            "seeds": 1,
+            "max_steps": 3000,  # 1.5 s: past the first contact
             "task": {"name": "held_insertion"},
             "scene": {"assets": {"chamfer": 0.001}},
             "physics": {"profile": "precision"},
@@ -405,7 +396,7 @@ def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path:
         }
     )
     rows = run_sweep(exp, tmp_path, workers=2, progress=False)
-    assert len(rows) == 8
+    assert len(rows) == 4
     header = (tmp_path / "episodes.csv").read_text().splitlines()[0].split(",")
     for column in (
         "arm",

@@ -31,7 +31,8 @@ PAGE = os.sysconf("SC_PAGE_SIZE")  # tmpfs counts whole pages
 ENOSPC = "No space left on device"
 EROFS = "Read-only file system"
 # No force trace and no step records: the files are small and each one can be hit on its own.
-LEAN = ["--set", "log.trace=false", "--set", "log.interval=100000"]
+# 2 s of the episode, which then times out: every file of a run, in a fifth of an episode's time.
+LEAN = ["--set", "log.trace=false", "--set", "log.interval=100000", "--max-steps", "2000"]
 SWEEP = """\
 name: tiny
 controllers: [{name: pd}]
@@ -192,7 +193,7 @@ def test_a_traced_run_on_a_full_disk_keeps_whole_trace_rows(
         print(f"traced, {stage}: {line} ({checked} files checked)")
 
 
-VIDEO = [*LEAN, "--video", "--max-steps", "3000"]
+VIDEO = [*LEAN, "--video", "--max-steps", "3000"]  # the last --max-steps counts
 
 
 @pytest.mark.slow

@@ -312,7 +312,14 @@ RUNS = {
 }
 
 
-@pytest.mark.parametrize("case", list(RUNS))
+# ~10 s each: the held-insertion end states, classified in tests/tasks (force_spike-held keeps a
+# held insertion's JSON here); and excessive_tilt (~5 s), provoked in tests/tasks/test_pick_and_place.
+SLOW_RUNS = ("wedged", "missed", "jammed", "excessive_tilt")
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, marks=pytest.mark.slow if c in SLOW_RUNS else ()) for c in RUNS]
+)
 def test_every_json_of_a_run_is_strict(
     case: str,
     tmp_path: Path,
@@ -463,6 +470,7 @@ def test_sweep_tables_hold_undefined_metrics_as_empty_cells_and_nulls(
     capsys.readouterr()
 
 
+@pytest.mark.slow  # ~14 s: the whole scripted insertion; the next test cuts the script short
 def test_the_teleop_summary_is_strict_json(
     tmp_path: Path, strict_json: Callable[[str], Any], complete_tree: Callable[[Path], int]
 ) -> None:
@@ -471,6 +479,29 @@ def test_the_teleop_summary_is_strict_json(
     _check_summary(summary)
     assert summary["trace_path"].endswith("forces.npz")
     assert complete_tree(tmp_path) == 6  # lock, config, summary, log, forces, states
+
+
+def test_a_teleop_session_ended_early_writes_strict_json(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    strict_json: Callable[[str], Any],
+    complete_tree: Callable[[Path], int],
+) -> None:
+    """The scripted session cut to 0.2 s: the peg is not at the hole, its metrics are null."""
+    from peg_ctrl.teleop import ScriptedOperator
+
+    monkeypatch.setattr(ScriptedOperator, "run", lambda self, **kwargs: self.session.advance(0.2))
+    assert main(["teleop", "--scripted", "--out", str(tmp_path)]) == 0
+    summary = strict_json((tmp_path / "summary.json").read_text())
+    assert (summary["status"], summary["end"], summary["end_state"]) == (
+        "failure",
+        "script_done",
+        "not_at_hole",
+    )
+    assert [summary[k] for k in HOLE_METRICS] == [None, None, None]
+    assert summary["total_timesteps"] == 200 and summary["trace_path"].endswith("forces.npz")
+    assert complete_tree(tmp_path) == 6  # lock, config, summary, log, forces, states
+    _check_end_record(tmp_path, summary)
 
 
 @pytest.mark.slow

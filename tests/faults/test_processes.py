@@ -35,7 +35,7 @@ from peg_ctrl.run.batch import run_batch
 from peg_ctrl.run.episode import WALL_CLOCK_FIELDS
 from peg_ctrl.run.workers import WATCH_PERIOD_S, worker_pool
 
-from ..conftest import assert_one_line_error, peg_sim, sigint_default
+from ..conftest import assert_one_line_error, peg_sim_here, sigint_default
 
 needs_proc = pytest.mark.skipif(
     not Path("/proc/self/environ").is_file(), reason="finds processes through /proc (Linux)"
@@ -220,7 +220,7 @@ def test_a_command_on_a_directory_in_use_is_refused_in_one_line(
     out, pid = held
     if argv[0] == "plot":
         (out / "episodes.csv").write_text("key\n")
-    proc = peg_sim([a.format(out=out, config=sweep_file) for a in argv], cwd=out.parent)
+    proc = peg_sim_here([a.format(out=out, config=sweep_file) for a in argv], cwd=out.parent)
     assert_one_line_error(
         proc, f"output directory {str(out)!r} is in use by another peg-sim process (pid {pid})"
     )
@@ -346,9 +346,9 @@ def test_ctrl_c_while_the_workers_start_prints_no_traceback(tmp_path: Path, swee
 
 
 def test_zero_workers_are_refused_in_one_line(tmp_path: Path, sweep_file: Path) -> None:
-    proc = peg_sim(["sweep", str(sweep_file), "--workers", "0"], cwd=tmp_path)
+    proc = peg_sim_here(["sweep", str(sweep_file), "--workers", "0"], cwd=tmp_path)
     assert_one_line_error(proc, "--workers must be >= 1, got 0")
-    proc = peg_sim(["validate-profile", "fast", "--workers", "0"], cwd=tmp_path)
+    proc = peg_sim_here(["validate-profile", "fast", "--workers", "0"], cwd=tmp_path)
     assert_one_line_error(proc, "--workers must be >= 1, got 0")
     assert sorted(os.listdir(tmp_path)) == [sweep_file.name], "refused before any output"
 
@@ -441,14 +441,14 @@ def test_plot_of_an_unfinished_sweep_says_what_it_covers(small_sweep: Path, tmp_
 def test_plot_refuses_a_damaged_table_it_cannot_rebuild(how: str, small_sweep: Path, tmp_path: Path) -> None:
     table = tmp_path / "episodes.csv"
     table.write_text(_damage((small_sweep / "episodes.csv").read_text(), how), newline="")
-    proc = peg_sim(["plot", str(tmp_path)], cwd=tmp_path)
+    proc = peg_sim_here(["plot", str(tmp_path)], cwd=tmp_path)
     assert_one_line_error(proc, f"{table} {episodes_csv_problem(table)}, ")
     assert f"and it cannot be rebuilt: there is no {tmp_path / 'experiment.json'}" in proc.stderr
     assert not (tmp_path / "report.md").exists()
 
 
 def test_plot_without_a_table_or_an_experiment_is_refused(tmp_path: Path) -> None:
-    assert_one_line_error(peg_sim(["plot", str(tmp_path)], cwd=tmp_path), "has no episodes.csv")
+    assert_one_line_error(peg_sim_here(["plot", str(tmp_path)], cwd=tmp_path), "has no episodes.csv")
 
 
 @pytest.mark.parametrize(

@@ -53,6 +53,7 @@ def test_attempts_are_limited(tmp_path: Path) -> None:
     assert s.summary["attempts"] == 5
 
 
+@pytest.mark.slow  # ~8 s; the scripted fixture below inserts the peg too, with the default script
 def test_scripted_session_inserts_the_peg(tmp_path: Path) -> None:
     fast = TeleopConfig(lin_speed=0.12, rot_speed=1.0, jaw_speed=0.08, lin_accel=1.2, jaw_accel=0.8)
     s = TeleopSession(tmp_path, config=fast)

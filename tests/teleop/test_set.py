@@ -13,7 +13,7 @@ from peg_ctrl.run.episode_log import read_log
 from peg_ctrl.sim.physics import PRECISION
 from peg_ctrl.teleop import ScriptedOperator
 
-from ..conftest import assert_one_line_error, peg_sim
+from ..conftest import assert_one_line_error, peg_sim_here
 
 
 def _written(out: Path) -> tuple[dict, dict, dict]:
@@ -24,6 +24,7 @@ def _written(out: Path) -> tuple[dict, dict, dict]:
     return config, summary, start
 
 
+@pytest.mark.slow  # ~9 s: the whole scripted insertion; the next test runs 0.1 s of it
 def test_scripted_teleop_runs_in_the_precision_profile(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -37,6 +38,18 @@ def test_scripted_teleop_runs_in_the_precision_profile(
     # time (SPEC §5's 50,000 steps of the seed profile: 50 s), so the script has time to insert.
     assert summary["total_timesteps"] == round(summary["sim_time_s"] / PRECISION.timestep)
     assert summary["status"] == "success" and summary["end"] == "script_done"
+
+
+def test_the_precision_profile_reaches_the_session(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ScriptedOperator, "run", lambda self, **kwargs: self.session.advance(0.1))
+    out = tmp_path / "session"
+    assert main(["teleop", "--scripted", "--set", "physics.profile=precision", "--out", str(out)]) == 0
+    config, summary, start = _written(out)
+    assert config["physics"] == {"profile": "precision"}
+    assert summary["physics"] == start["physics"] == "precision"
+    assert (
+        summary["total_timesteps"] == round(0.1 / PRECISION.timestep) == round(summary["sim_time_s"] / 0.0005)
+    )
 
 
 def test_controller_and_scene_settings_reach_the_session(
@@ -84,14 +97,14 @@ def test_controller_and_scene_settings_reach_the_session(
 def test_bad_settings_are_one_line_with_exit_2_and_write_nothing(
     options: list[str], message: str, tmp_path: Path
 ) -> None:
-    proc = peg_sim(["teleop", "--scripted", *options, "--out", "X"], cwd=tmp_path)
+    proc = peg_sim_here(["teleop", "--scripted", *options, "--out", "X"], cwd=tmp_path)
     assert_one_line_error(proc, message)
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("item", ["physics.profile=nope", "scene.assets.clearance=abc"])
 def test_a_bad_field_is_the_error_run_gives(item: str, tmp_path: Path) -> None:
-    teleop = peg_sim(["teleop", "--scripted", "--set", item, "--out", "X"], cwd=tmp_path)
-    run = peg_sim(["run", "--set", item, "--out", "X"], cwd=tmp_path)
+    teleop = peg_sim_here(["teleop", "--scripted", "--set", item, "--out", "X"], cwd=tmp_path)
+    run = peg_sim_here(["run", "--set", item, "--out", "X"], cwd=tmp_path)
     assert teleop.returncode == run.returncode == 2 and teleop.stderr == run.stderr, teleop.stderr
     assert list(tmp_path.iterdir()) == []

@@ -14,6 +14,9 @@ from peg_ctrl.progress import ENV_VAR
 from peg_ctrl.run.episode import EpisodeConfig, run_episode
 from peg_ctrl.tools.replay import REPLAY_FPS, extract_frames, frame_times, replay
 
+# The recorded run renders every frame (as the replays do): kept short.
+DURATION = 0.3  # of the recorded run [s]: 300 physics steps of 1 ms
+
 
 def _frames(path: Path) -> list[np.ndarray]:
     import imageio.v2 as imageio
@@ -27,9 +30,9 @@ def _frames(path: Path) -> list[np.ndarray]:
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """0.6 s of an episode, with its video."""
+    """The first DURATION seconds of an episode, with its video."""
     out = tmp_path_factory.mktemp("run")
-    run_episode(EpisodeConfig(max_steps=600), out, video=True, plot=False)
+    run_episode(EpisodeConfig(max_steps=round(DURATION * 1000)), out, video=True, plot=False)
     return out
 
 
@@ -38,7 +41,7 @@ def test_replay_renders_the_run_at_the_video_rate(run: Path, tmp_path: Path, cap
     assert main(["replay", str(run), "--video", str(out)]) == 0
     assert capsys.readouterr().out.strip() == f"wrote {out}"
     replayed, recorded = _frames(out), _frames(run / "episode.mp4")
-    assert abs(len(replayed) - round(0.6 * REPLAY_FPS + 1)) <= 1  # 0 .. 0.6 s, both ends
+    assert abs(len(replayed) - round(DURATION * REPLAY_FPS + 1)) <= 1  # 0 .. DURATION, both ends
     assert len(replayed) == len(recorded)
     assert replayed[0].shape == recorded[0].shape == (480, 1280, 3)
     # The same state at the same time: the frames agree up to video compression (the run renders
@@ -54,14 +57,14 @@ def test_replay_writes_beside_the_run_by_default(run: Path, tmp_path: Path) -> N
     shutil.copytree(run, copy)
     assert replay(copy, speed=3.0) == copy / "replay.mp4"
     assert len(_frames(copy / "replay.mp4")) == len(
-        frame_times(np.array([0.0, 0.6]), fps=REPLAY_FPS, speed=3.0)
+        frame_times(np.array([0.0, DURATION]), fps=REPLAY_FPS, speed=3.0)
     )
 
 
 def test_replay_shows_a_bar_over_the_frames_only_when_asked(
     run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    frames = len(frame_times(np.array([0.0, 0.6]), fps=REPLAY_FPS, speed=3.0))
+    frames = len(frame_times(np.array([0.0, DURATION]), fps=REPLAY_FPS, speed=3.0))
     argv = ["replay", str(run), "--speed", "3", "--video"]
     monkeypatch.setenv(ENV_VAR, "1")
     assert main([*argv, str(tmp_path / "shown.mp4")]) == 0
@@ -82,8 +85,8 @@ def test_frame_times_follow_the_speed() -> None:
 
 
 def test_extract_frames_scales_them(run: Path, tmp_path: Path) -> None:
-    paths = extract_frames(run / "episode.mp4", [0.0, 0.5], tmp_path, width=320)
-    assert [p.name for p in paths] == ["frame_00.00s.png", "frame_00.50s.png"]
+    paths = extract_frames(run / "episode.mp4", [0.0, 0.25], tmp_path, width=320)
+    assert [p.name for p in paths] == ["frame_00.00s.png", "frame_00.25s.png"]
     from PIL import Image
 
     assert Image.open(paths[1]).size == (320, 120)

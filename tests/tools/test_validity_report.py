@@ -10,7 +10,7 @@ import pytest
 from peg_ctrl.sim.validity import CLEARANCES
 from peg_ctrl.tools.bench import bench_profiles
 
-from ..conftest import assert_one_line_error, peg_sim
+from ..conftest import assert_one_line_error, peg_sim, peg_sim_here
 
 
 @pytest.mark.parametrize(
@@ -22,7 +22,7 @@ from ..conftest import assert_one_line_error, peg_sim
     ],
 )
 def test_bad_validity_arguments_fail_in_one_line(tmp_path: Path, argv: list[str], message: str) -> None:
-    assert_one_line_error(peg_sim([*argv, "--out", "v"], cwd=tmp_path), message)
+    assert_one_line_error(peg_sim_here([*argv, "--out", "v"], cwd=tmp_path), message)
     assert not (tmp_path / "v").exists()
 
 
