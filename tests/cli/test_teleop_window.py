@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -48,10 +49,31 @@ def _xdotool(display: str, *args: str) -> str:
     ).stdout.strip()
 
 
+def _steps(records: list[dict], attempt: int | None = None) -> list[dict]:
+    return [r for r in records if r["event"] == "step" and attempt in (None, r["attempt"])]
+
+
+def _released_and_ran_on(records: list[dict]) -> bool:
+    """Step records of the first attempt more than 600 steps after the last one with 8 held."""
+    held = [r["step"] for r in _steps(records, 1) if "8" in r["keys"]]
+    return bool(held) and _steps(records, 1)[-1]["step"] > held[-1] + 600
+
+
+def _wait_for_log(proc: subprocess.Popen, log: Path, done: Callable[[list[dict]], bool], what: str) -> None:
+    """Until the session's log shows ``done``. The window paces the session to the clock, but
+    no faster than it can draw: on a loaded machine its simulated time falls behind the clock,
+    so the test waits on the session's own records rather than on the clock."""
+    deadline = time.monotonic() + 120.0
+    while not (log.is_file() and done(read_log(log))):
+        assert proc.poll() is None, f"teleop exited ({proc.returncode}) before it did {what}"
+        assert time.monotonic() < deadline, f"the session did not {what} within 120 s"
+        time.sleep(0.1)
+
+
 def test_window_keys_move_reset_and_quit(xserver: str, tmp_path: Path) -> None:
     env = {**os.environ, "DISPLAY": xserver}
     env.pop("MUJOCO_GL", None)
-    shot = tmp_path / "teleop_window.png"
+    shot, log = tmp_path / "teleop_window.png", tmp_path / "log.jsonl"
     proc = subprocess.Popen(
         [sys.executable, "-m", "peg_ctrl", "teleop", "--out", str(tmp_path), "--screenshot", str(shot)],
         env=env,
@@ -63,13 +85,18 @@ def test_window_keys_move_reset_and_quit(xserver: str, tmp_path: Path) -> None:
         window = _xdotool(xserver, "search", "--sync", "--name", "peg_ctrl teleop").splitlines()[0]
         _xdotool(xserver, "windowfocus", "--sync", window)
         _xdotool(xserver, "mousemove", "--window", window, "400", "400")
-        time.sleep(1.5)
+        _wait_for_log(proc, log, lambda records: len(_steps(records)) >= 3, "start")
         _xdotool(xserver, "keydown", "8")
-        time.sleep(2.0)
+        _wait_for_log(
+            proc,
+            log,
+            lambda records: any(r["gripper"]["position"][2] > 0.21 for r in _steps(records, 1)),
+            "move the gripper up 1 cm with 8 held",
+        )
         _xdotool(xserver, "keyup", "8")
-        time.sleep(1.5)
+        _wait_for_log(proc, log, _released_and_ran_on, "run on after 8 was released")
         _xdotool(xserver, "key", "z")
-        time.sleep(1.0)
+        _wait_for_log(proc, log, lambda records: len(_steps(records, 2)) >= 3, "reset")
         _xdotool(xserver, "key", "Escape")
         # Esc ends the session at the next control step (the end record below says "quit");
         # the process then writes its files and exits by itself, in a time that grows with the
@@ -79,9 +106,9 @@ def test_window_keys_move_reset_and_quit(xserver: str, tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0, err
-    records = read_log(tmp_path / "log.jsonl")
+    records = read_log(log)
     assert records[-1]["event"] == "end" and records[-1]["end"] == "quit"
-    steps = [r for r in records if r["event"] == "step"]
+    steps = _steps(records)
     held = [r for r in steps if "8" in r["keys"]]
     assert held, "the key press never reached the session"
     z = [r["gripper"]["position"][2] for r in steps if r["attempt"] == 1]
