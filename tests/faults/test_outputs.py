@@ -429,7 +429,7 @@ def test_a_full_disk_at_the_plot_keeps_the_summary(
 
 def test_a_video_is_written_whole(tmp_path: Path, complete_tree: Callable[[Path], int]) -> None:
     try:
-        result: EpisodeResult = run_episode(EpisodeConfig(max_steps=300), tmp_path, video=True, plot=False)
+        result: EpisodeResult = run_episode(EpisodeConfig(max_steps=100), tmp_path, video=True, plot=False)
     except mujoco.FatalError as exc:  # pragma: no cover - no offscreen GL here
         pytest.skip(f"no offscreen rendering: {exc}")
     assert result.video_path == str(tmp_path / "episode.mp4")

@@ -164,6 +164,21 @@ def test_failures_are_named(tmp_path: Path, cfg: EpisodeConfig, reason: str, pha
     assert read_log(tmp_path / "log.jsonl")[-1]["reason"] == reason
 
 
+def test_fixed_speed_planner_with_a_guarded_insert(tmp_path: Path) -> None:
+    """Both in one episode; each alone in the next test."""
+    result = run_episode(
+        EpisodeConfig(
+            seed=5, planner="fixed_speed", randomization=RANDOM, task=TaskConfig(force_guarded_insert=True)
+        ),
+        tmp_path,
+        plot=False,
+    )
+    assert result.status == "success", result.detail
+    assert result.planner == "fixed_speed"
+    assert "insert" in [p["phase"] for p in result.phases]  # the guarded insert's phase
+
+
+@pytest.mark.slow  # two whole episodes (~7 s); the test above runs both features in one
 def test_fixed_speed_planner_and_guarded_insert(tmp_path: Path) -> None:
     fixed = run_episode(
         EpisodeConfig(seed=5, planner="fixed_speed", randomization=RANDOM), tmp_path / "f", plot=False

@@ -20,6 +20,7 @@ from peg_ctrl.tasks.monitors import FIRST_CONTACT_N
 from peg_ctrl.teleop import SCRIPTED_INSERTION, ScriptedOperator, TeleopConfig, TeleopSession
 
 CFG = TeleopConfig()
+FAST = TeleopConfig(lin_speed=0.12, rot_speed=1.0, jaw_speed=0.08, lin_accel=1.2, jaw_accel=0.8)
 DT = 0.001
 HOME = np.array([-0.2, 0.0, 0.2])
 
@@ -53,10 +54,9 @@ def test_attempts_are_limited(tmp_path: Path) -> None:
     assert s.summary["attempts"] == 5
 
 
-@pytest.mark.slow  # ~8 s; the scripted fixture below inserts the peg too, with the default script
+@pytest.mark.slow  # ~8 s; the scripted fixture below inserts the peg too, with the CLI's script
 def test_scripted_session_inserts_the_peg(tmp_path: Path) -> None:
-    fast = TeleopConfig(lin_speed=0.12, rot_speed=1.0, jaw_speed=0.08, lin_accel=1.2, jaw_accel=0.8)
-    s = TeleopSession(tmp_path, config=fast)
+    s = TeleopSession(tmp_path, config=FAST)
     goals = [
         ("z", 0.020),
         ("jaw", 0.0),
@@ -85,9 +85,10 @@ TIGHT = SceneConfig(assets=dataclasses.replace(AssetParams(), clearance=3e-4))
 
 @pytest.fixture(scope="module")
 def scripted(tmp_path_factory: pytest.TempPathFactory) -> tuple[TeleopSession, dict[str, Any], Path]:
-    """The scripted insertion of ``peg-sim teleop --scripted``, in a bore tight enough to touch."""
+    """The scripted insertion of ``peg-sim teleop --scripted``, in a bore tight enough to touch,
+    at the faster key rates (30 s of simulated time instead of 40)."""
     out = tmp_path_factory.mktemp("teleop")
-    session = TeleopSession(out, scene=TIGHT)
+    session = TeleopSession(out, scene=TIGHT, config=FAST)
     ScriptedOperator(session, SCRIPTED_INSERTION).run(max_sim_s=120.0)
     return session, session.finish("script_done"), out
 

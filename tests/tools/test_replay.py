@@ -15,7 +15,7 @@ from peg_ctrl.run.episode import EpisodeConfig, run_episode
 from peg_ctrl.tools.replay import REPLAY_FPS, extract_frames, frame_times, replay
 
 # The recorded run renders every frame (as the replays do): kept short.
-DURATION = 0.3  # of the recorded run [s]: 300 physics steps of 1 ms
+DURATION = 0.2  # of the recorded run [s]: 200 physics steps of 1 ms
 
 
 def _frames(path: Path) -> list[np.ndarray]:
@@ -85,8 +85,8 @@ def test_frame_times_follow_the_speed() -> None:
 
 
 def test_extract_frames_scales_them(run: Path, tmp_path: Path) -> None:
-    paths = extract_frames(run / "episode.mp4", [0.0, 0.25], tmp_path, width=320)
-    assert [p.name for p in paths] == ["frame_00.00s.png", "frame_00.25s.png"]
+    paths = extract_frames(run / "episode.mp4", [0.0, 0.15], tmp_path, width=320)
+    assert [p.name for p in paths] == ["frame_00.00s.png", "frame_00.15s.png"]
     from PIL import Image
 
     assert Image.open(paths[1]).size == (320, 120)
