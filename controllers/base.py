@@ -23,6 +23,7 @@ import numpy as np
 
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownComponent
+from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.jaw import JawCalibration, load_default
 from peg_ctrl.sim.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
 from peg_ctrl.sim.state import ControlState
@@ -96,6 +97,8 @@ class Controller(Protocol):
 
     The episode loop owns time: it calls :meth:`reset` once with the initial state, then
     :meth:`compute` every control period and writes ``ControlOutput.ctrl`` into ``data.ctrl``.
+    A controller that declares :attr:`observes_belief` hears, through :meth:`observe_belief`,
+    each belief a task with the ``belief`` capability states.
     """
 
     @property
@@ -108,9 +111,22 @@ class Controller(Protocol):
         """Control period [s], a whole multiple of the physics timestep."""
         ...
 
+    @property
+    def observes_belief(self) -> bool:
+        """Whether :meth:`observe_belief` uses the task's belief (a class attribute)."""
+        ...
+
     def reset(self, state: ControlState) -> None: ...
 
     def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput: ...
+
+    def observe_belief(self, belief: Belief | None) -> None:
+        """The task's new belief (None: it states none); called before :meth:`compute`."""
+        ...
+
+    def timings(self) -> list[SolveTiming]:
+        """The wall times of the controller's optimisers since reset (none for a plain law)."""
+        ...
 
 
 class ActuatorMap:
@@ -338,12 +354,25 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
     :meth:`compute` times the call, runs the law, checks the result is finite, saturates it to
     the actuator ranges, maps the jaw separation to its actuator byte and packs ``ctrl``.
 
+    A subclass that uses the task's belief sets ``observes_belief = True`` and overrides
+    :meth:`observe_belief`; the one without the other is refused when the class is defined.
+
     Attributes:
         config: The controller's config.
         control_dt: Control period in [s] (``config.control_dt``).
     """
 
     name: ClassVar[str]
+    observes_belief: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        overrides = cls.observe_belief is not ControllerBase.observe_belief
+        if overrides != cls.observes_belief:
+            raise TypeError(
+                f"{cls.__name__}: observes_belief = {cls.observes_belief} but observe_belief is "
+                f"{'overridden' if overrides else 'not overridden'}; declare both or neither"
+            )
 
     def __init__(
         self, model: mujoco.MjModel, config: _Cfg, *, jaw_calibration: JawCalibration | None = None
@@ -367,6 +396,9 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
     def timings(self) -> list[SolveTiming]:
         """The wall times of the controller's optimisers since reset (none by default)."""
         return []
+
+    def observe_belief(self, belief: Belief | None) -> None:
+        """Ignored: a controller that uses the task's belief declares ``observes_belief``."""
 
     @abc.abstractmethod
     def control_law(self, state: ControlState, target: GripperTarget) -> Effort:

@@ -224,6 +224,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
     """
 
     name = "sampling_mpc"
+    observes_belief = True  # its model of the world is built from the task's belief
 
     def __init__(
         self,
@@ -265,7 +266,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         self._acc_rate = np.zeros(6)
 
     # -- belief ----------------------------------------------------------------------------------
-    def observe_belief(self, belief: object) -> None:
+    def observe_belief(self, belief: Belief | None) -> None:
         """Rebuild the belief model for the task's new belief (see :mod:`peg_ctrl.sim.belief`;
         None: the task states none, and the model is the hand alone)."""
         self._belief = belief if isinstance(belief, Belief) else None

@@ -1,10 +1,12 @@
 """The layers (docs/architecture.md): import-linter keeps them, and breaks on an upward import;
 the installed package has one import name, a small top level and no long function; the old
-module names still import, with a warning."""
+module names still import, with a warning; no layer probes a task or a controller for what it
+offers."""
 
 from __future__ import annotations
 
 import ast
+import re
 import shutil
 import subprocess
 import sys
@@ -157,3 +159,52 @@ def test_the_architecture_page_draws_the_contract_s_layers_in_order() -> None:
         foundation = all((ROOT / "peg_ctrl" / f"{name}.py").is_file() for name in names)
         drawn += ["foundation"] if foundation else names
     assert list(dict.fromkeys(drawn)) == nodes
+
+
+#: Calls that look an attribute up by name, and what must not be their first argument: a task or
+#: a controller (or a composite's inner one), by the name of the expression that holds it.
+_PROBES = ("getattr", "hasattr", "getattr_static")
+_COMPONENT = re.compile(r"task|controller|inner", re.IGNORECASE)
+
+
+def _probes(path: Path) -> list[tuple[int, str]]:
+    """The calls in ``path`` that look up a task's or a controller's attribute by name, outside
+    ``check_capabilities`` (the one place that compares a task's members with its declaration)."""
+    tree = ast.parse(path.read_text())
+    allowed: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef) and node.name == "check_capabilities":
+            allowed.update(range(node.lineno, node.end_lineno + 1))  # type: ignore[operator]
+    found = []
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Call) and node.args) or node.lineno in allowed:
+            continue
+        func = node.func
+        name = func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else ""
+        if name in _PROBES and _COMPONENT.search(ast.unparse(node.args[0])):
+            found.append((node.lineno, ast.unparse(node)))
+    return found
+
+
+def test_the_probe_finder_finds_a_probe_of_a_task_and_not_of_a_config(tmp_path: Path) -> None:
+    source = tmp_path / "probe.py"
+    source.write_text(
+        "def f(loop, inner, config):\n"
+        "    a = getattr(loop.task, 'belief', None)\n"
+        "    b = hasattr(inner, 'insertion')\n"
+        "    c = inspect.getattr_static(self.controller, 'timings')\n"
+        "    return getattr(config, 'name')\n"
+    )
+    assert [line for line, _ in _probes(source)] == [2, 3, 4]
+
+
+def test_no_layer_probes_a_task_or_a_controller_for_what_it_offers() -> None:
+    """What a task offers is declared (``Capabilities`` in peg_ctrl/tasks/base.py) and what a
+    controller offers is in its protocol (controllers/base.py): nothing looks either up by name."""
+    found = [
+        f"{path.relative_to(ROOT)}:{line}: {call}"
+        for package in ("peg_ctrl", "controllers", "planners", "experiments")
+        for path in sorted((ROOT / package).rglob("*.py"))
+        for line, call in _probes(path)
+    ]
+    assert found == []

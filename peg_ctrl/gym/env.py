@@ -108,7 +108,7 @@ import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium
 import mujoco
@@ -124,7 +124,15 @@ from peg_ctrl.run.loop import Loop, StepInfo
 from peg_ctrl.run.recorders import FollowCamera
 from peg_ctrl.sim.rotations import quat_mul, rotate_inv
 from peg_ctrl.sim.state import BLOCK_PEG, ControlState, ft_world
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, Task, close_open_record
+from peg_ctrl.tasks.base import (
+    Capabilities,
+    Evaluation,
+    Observation,
+    PhaseRecord,
+    Task,
+    close_open_record,
+    insertion_task,
+)
 
 __all__ = [
     "ENV_ID",
@@ -165,13 +173,15 @@ class AgentTask:
 
     name = "agent"
     phases: tuple[str, ...] = ("agent",)
+    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True)
 
     def __init__(self, inner: Task) -> None:
-        if not (hasattr(inner, "insertion") and hasattr(inner, "seated")):
+        inserting = insertion_task(inner)
+        if inserting is None:
             raise ConfigError(f"task {inner.name!r} has no insertion check to drive with actions")
         self.inner = inner
-        self.insertion = inner.insertion  # type: ignore[attr-defined]
-        self.seated = inner.seated  # type: ignore[attr-defined]
+        self.insertion = inserting.insertion
+        self.seated = inserting.seated
         self.command: GripperTarget | None = None
         self._records: list[PhaseRecord] = []
 
@@ -182,6 +192,10 @@ class AgentTask:
     @property
     def grasped(self) -> bool:
         return self.inner.grasped
+
+    @property
+    def time_to_insert(self) -> float | None:
+        return self.seated.since
 
     @property
     def records(self) -> list[PhaseRecord]:

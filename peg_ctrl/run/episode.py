@@ -49,7 +49,7 @@ from peg_ctrl.sim.jaw import load_default
 from peg_ctrl.sim.physics import PhysicsConfig
 from peg_ctrl.sim.physics import profile as physics_profile
 from peg_ctrl.sim.scene import SceneConfig, build_model, check_scene
-from peg_ctrl.tasks.base import TaskContext, TaskSpec
+from peg_ctrl.tasks.base import TaskContext, TaskSpec, insertion_task
 from peg_ctrl.tasks.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
 from peg_ctrl.tasks.strategies import strategy_name
@@ -607,11 +607,11 @@ def _result(
     cfg: EpisodeConfig, loop: Loop, outcome: LoopOutcome, wall: float, logger: EpisodeLogger
 ) -> EpisodeResult:
     task = loop.task
-    insertion = getattr(task, "insertion", None)
-    m = insertion.last if insertion is not None else None
+    inserting = insertion_task(task)
+    m = inserting.insertion.last if inserting is not None else None
     records = task.records
     grasp = loop.grasp
-    time_to_insert = getattr(task, "time_to_insert", None)
+    time_to_insert = inserting.time_to_insert if inserting is not None else None
     fields = contact_fields(loop, m, seated=outcome.status == "success", assets=cfg.scene.assets)
     first = fields["first_contact_s"]
     return EpisodeResult(
@@ -659,9 +659,8 @@ def timing_fields(loop: Loop) -> dict[str, Any]:
     if loop.compute_times:
         p50, p99 = np.percentile(loop.compute_times, [50, 99])
         fields.update(control_time_p50_s=float(p50), control_time_p99_s=float(p99))
-    timings = getattr(loop.controller, "timings", None)
     solvers: dict[str, dict[str, float]] = {}
-    for timing in timings() if timings is not None else []:
+    for timing in loop.controller.timings():
         if not timing.times_s:
             continue
         times = np.asarray(timing.times_s)

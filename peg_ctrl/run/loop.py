@@ -33,10 +33,11 @@ from numpy.typing import NDArray
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
+from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.ft_model import FTSensorModel, FTSensorStream
 from peg_ctrl.sim.scene import HOME_KEY, SceneConfig, contact_sensor_name
 from peg_ctrl.sim.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
-from peg_ctrl.tasks.base import Evaluation, Observation, Task
+from peg_ctrl.tasks.base import Evaluation, Observation, Task, belief_task, check_capabilities
 from peg_ctrl.tasks.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
 from peg_ctrl.timing import control_decimation
 
@@ -272,6 +273,7 @@ class Loop:
     phantom_depth: float | None = None  # see PhantomGuard; None: plain mj_step
 
     def __post_init__(self) -> None:
+        check_capabilities(self.task)
         self.data = mujoco.MjData(self.model)
         self.reader = StateReader(self.model, contact_threshold_n=self.contact_threshold_n)
         self.decimation = control_decimation(self.controller.control_dt, self.model.opt.timestep)
@@ -289,8 +291,8 @@ class Loop:
         self.peg: PegObservation | None = None
         self.guard = PhantomGuard(self.model, self.phantom_depth) if self.phantom_depth is not None else None
         # A controller that plans on a model of the world hears the task's belief (peg_ctrl.sim.belief).
-        self._observe = getattr(self.controller, "observe_belief", None)
-        self._belief: object = None
+        self._observe = self.controller.observe_belief if self.controller.observes_belief else None
+        self._belief: Belief | None = None
         self.compute_times: list[float] = []  # the controller's wall time per control step [s]
         self._sensed: ControlState | None = None  # this control period's reading (sensed())
 
@@ -386,7 +388,8 @@ class Loop:
 
     def _compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
         if self._observe is not None:
-            belief = getattr(self.task, "belief", None)
+            believing = belief_task(self.task)  # the task may be replaced between steps (gym)
+            belief = believing.belief if believing is not None else None
             if belief is not self._belief:
                 self._belief = belief
                 self._observe(belief)

@@ -5,19 +5,28 @@ evaluates named metrics and success or failure after every control step (ManiSki
 ``evaluate()``). It never steps or forwards the simulation during an episode: the loop owns
 time. (Building the initial state in :meth:`Task.reset` may simulate, as the held-insertion
 task closes the jaw on its peg; the episode's clock starts after it.)
+
+What a task offers beyond :class:`Task` is declared, not probed: its class states its
+:class:`Capabilities`, each promising the members of a typed protocol (:class:`InsertionTask`,
+:class:`BeliefTask`). The loop checks the declaration against the task once, when it is built
+(:func:`check_capabilities`); the layers above then reach a capability through
+:func:`insertion_task` and :func:`belief_task`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
+import inspect
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, cast
 
 import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import UnknownComponent
+from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.state import ControlState, PegObservation
+from peg_ctrl.tasks.monitors import InsertionMonitor, SeatedHold
 
 if TYPE_CHECKING:
     from peg_ctrl.planners.base import MotionLimits, Planner
@@ -28,6 +37,12 @@ __all__ = [
     "Observation",
     "Evaluation",
     "Task",
+    "Capabilities",
+    "InsertionTask",
+    "BeliefTask",
+    "check_capabilities",
+    "insertion_task",
+    "belief_task",
     "TaskSpec",
     "TaskContext",
     "PhaseRecord",
@@ -85,11 +100,36 @@ def close_open_record(records: list[PhaseRecord], t: float, outcome: str) -> Non
         records[-1].outcome = records[-1].outcome or outcome
 
 
+@dataclasses.dataclass(frozen=True)
+class Capabilities:
+    """What a task offers beyond the :class:`Task` protocol, declared by its class.
+
+    Each flag promises the members of one protocol, which :func:`check_capabilities` verifies
+    when the loop is built; a task that has those members without declaring them is refused too.
+
+    Attributes:
+        insertion: The task measures the peg at the hole and holds it to a seated criterion
+            (:class:`InsertionTask`: ``insertion``, ``seated``, ``time_to_insert``); the episode
+            summary's hole metrics and time to insert come from it.
+        belief: The task states what it believes about the hole and the grasp
+            (:class:`BeliefTask`: ``belief``), which the loop hands to a controller that
+            observes beliefs.
+    """
+
+    insertion: bool = False
+    belief: bool = False
+
+
 class Task(Protocol):
     """What the loop needs from a task."""
 
     name: str
     phases: tuple[str, ...]  # every phase name, in order (the force trace stores their index)
+
+    @property
+    def capabilities(self) -> Capabilities:
+        """What the task offers beyond this protocol (a class attribute)."""
+        ...
 
     @property
     def phase(self) -> str:
@@ -127,6 +167,76 @@ class Task(Protocol):
         ...
 
 
+class InsertionTask(Task, Protocol):
+    """A task with ``Capabilities(insertion=True)``: it measures the peg at the hole and holds
+    it to a seated criterion."""
+
+    insertion: InsertionMonitor  # the peg's measures at the hole, the last one and the criterion
+    seated: SeatedHold  # how long the criterion has held
+
+    @property
+    def time_to_insert(self) -> float | None:
+        """When the seated hold that succeeded (or is under way) began [s]; None before."""
+        ...
+
+
+class BeliefTask(Task, Protocol):
+    """A task with ``Capabilities(belief=True)``: it states what it believes about the world."""
+
+    @property
+    def belief(self) -> Belief:
+        """The hole and the grasp as the task believes them (a new object when they change)."""
+        ...
+
+
+_ABSENT = object()
+
+#: Each capability (a :class:`Capabilities` field) and the protocol whose members it promises.
+_PROTOCOLS: dict[str, type] = {"insertion": InsertionTask, "belief": BeliefTask}
+
+
+def _members(protocol: type) -> tuple[str, ...]:
+    """The members a capability's protocol adds to :class:`Task`, in a fixed order."""
+    own = {name for name in vars(protocol) if not name.startswith("_")}
+    return tuple(sorted(own | set(vars(protocol).get("__annotations__", {}))))
+
+
+def check_capabilities(task: object) -> None:
+    """Check that ``task``'s class declares its :class:`Capabilities` and that each one it
+    declares, and none other, matches the members the task has.
+
+    Members are looked up without running them (a property is not evaluated), once per loop.
+
+    Raises:
+        TypeError: naming the task, the capability and the members that are missing, or that
+            are there undeclared.
+    """
+    label = f"task {type(task).__name__}"
+    declared = inspect.getattr_static(task, "capabilities", _ABSENT)
+    if not isinstance(declared, Capabilities):
+        raise TypeError(f"{label} does not declare its capabilities (capabilities = Capabilities(...))")
+    for flag, claimed in dataclasses.asdict(declared).items():
+        members = _members(_PROTOCOLS[flag])
+        missing = [m for m in members if inspect.getattr_static(task, m, _ABSENT) is _ABSENT]
+        if claimed and missing:
+            raise TypeError(f"{label} declares capability {flag!r} but lacks {', '.join(missing)}")
+        if not claimed and not missing:
+            raise TypeError(
+                f"{label} has {', '.join(members)} but does not declare capability {flag!r} "
+                f"(capabilities = Capabilities({flag}=True))"
+            )
+
+
+def insertion_task(task: Task) -> InsertionTask | None:
+    """``task`` as an :class:`InsertionTask` if it declares ``insertion``, else None."""
+    return cast("InsertionTask", task) if task.capabilities.insertion else None
+
+
+def belief_task(task: Task) -> BeliefTask | None:
+    """``task`` as a :class:`BeliefTask` if it declares ``belief``, else None."""
+    return cast("BeliefTask", task) if task.capabilities.belief else None
+
+
 class TaskContext(NamedTuple):
     """What every task is built with, besides its own config (from the episode's config)."""
 
@@ -148,6 +258,12 @@ class TaskSpec:
     """
 
     name: ClassVar[str]
+
+    @property
+    def strategy_name(self) -> str:
+        """The name of the insertion strategy the task runs (``task.strategy``); "" for a task
+        without strategies (the default)."""
+        return ""
 
     def build(self, context: TaskContext) -> Task:
         """The task this config describes."""

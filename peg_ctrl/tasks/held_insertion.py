@@ -60,7 +60,7 @@ from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor
 from peg_ctrl.sim.state import ControlState
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
     InsertionMeasure,
@@ -111,6 +111,10 @@ class HeldInsertionConfig(TaskSpec):
         if self.tilt_error >= 0.2:
             raise ConfigError(f"task.tilt_error must be below 0.2 rad, got {self.tilt_error!r}")
 
+    @property
+    def strategy_name(self) -> str:
+        return self.strategy.name
+
     def build(self, context: TaskContext) -> HeldInsertionTask:
         return HeldInsertionTask(
             scene=context.scene,
@@ -159,6 +163,7 @@ class HeldInsertionTask(PlannedMoves):
     It is the :class:`~peg_ctrl.tasks.strategies.HeldInsertion` its strategy drives."""
 
     name = "held_insertion"
+    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True, belief=True)
 
     def __init__(
         self,

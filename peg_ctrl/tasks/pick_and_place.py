@@ -56,7 +56,7 @@ from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.sim.jaw import JawCalibration
 from peg_ctrl.sim.rotations import quat_mul, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import (
     InsertionMeasure,
     InsertionMonitor,
@@ -203,6 +203,7 @@ class PickAndPlaceTask(PlannedMoves):
 
     name = "pick_and_place"
     phases: tuple[str, ...] = PHASES
+    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True)
 
     def __init__(
         self,

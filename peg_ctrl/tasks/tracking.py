@@ -8,13 +8,14 @@ exhausted.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import ClassVar
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, close_open_record
+from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, close_open_record
 
 __all__ = ["TrackingTask"]
 
@@ -30,6 +31,7 @@ class TrackingTask:
 
     name = "track"
     phases: tuple[str, ...] = ("track",)
+    capabilities: ClassVar[Capabilities] = Capabilities()
     grasped = False
 
     def __init__(

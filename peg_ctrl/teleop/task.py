@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.sim.scene import SceneConfig
-from peg_ctrl.tasks.base import Evaluation, Observation, PhaseRecord, close_open_record
+from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, close_open_record
 from peg_ctrl.tasks.monitors import InsertionMeasure, InsertionMonitor, SettledCriterion
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, initial_qpos
 from peg_ctrl.teleop.mapper import TeleopConfig, TeleopMapper
@@ -36,6 +38,8 @@ class TeleopTask:
 
     name = "teleop"
     phases: tuple[str, ...] = ("teleop",)
+    # Its insertion check is the operator's settled criterion, read by the session, not a seated hold.
+    capabilities: ClassVar[Capabilities] = Capabilities()
     grasped = False  # the operator may let go at any time: no slip monitoring
 
     def __init__(

@@ -272,3 +272,22 @@ def test_every_controller_holds_a_pose(name: str, model: mujoco.MjModel) -> None
     err = np.zeros(3)
     mujoco.mju_subQuat(err, goal.quat_world, state.quat_world)
     assert np.linalg.norm(err) < 0.02
+
+
+def test_observing_the_task_s_belief_is_declared_with_the_method_that_does_it(model: mujoco.MjModel) -> None:
+    assert make_controller("sampling_mpc", model).observes_belief
+    assert not Constant.observes_belief
+    with pytest.raises(
+        TypeError, match=r"^Deaf: observes_belief = True but observe_belief is not overridden;"
+    ):
+
+        class Deaf(Constant):
+            observes_belief = True
+
+    with pytest.raises(
+        TypeError, match=r"^Secret: observes_belief = False but observe_belief is overridden;"
+    ):
+
+        class Secret(Constant):
+            def observe_belief(self, belief: object) -> None:
+                pass

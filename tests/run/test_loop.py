@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
+from typing import Any, ClassVar
+
 import mujoco
 import numpy as np
 import pytest
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers import make_controller
-from peg_ctrl.controllers.base import ControlOutput
+from peg_ctrl.controllers.base import ControlOutput, SolveTiming
+from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.errors import ConfigError, DivergenceError
 from peg_ctrl.run.loop import Loop, SensorNoise, StepInfo
 from peg_ctrl.sim.ft_model import FT_PRESETS, FTSensorModel
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.state import BLOCK_PEG, PAIRS, ControlState
+from peg_ctrl.tasks.base import Capabilities
 from peg_ctrl.tasks.monitors import ContactMonitor
 from peg_ctrl.tasks.tracking import TrackingTask
 
@@ -77,14 +81,23 @@ def test_a_monitor_failure_ends_the_run_and_its_step_is_still_recorded(model: mu
 
 
 class Exploding:
+    """A controller written against the protocol alone, not :class:`ControllerBase`."""
+
     name = "exploding"
     control_dt = 0.001
+    observes_belief = False
 
     def reset(self, state: ControlState) -> None:
         pass
 
     def compute(self, state: ControlState, target: GripperTarget) -> ControlOutput:
         raise DivergenceError("non-finite control")
+
+    def observe_belief(self, belief: object) -> None:
+        pass
+
+    def timings(self) -> list[SolveTiming]:
+        return []
 
 
 def test_a_diverging_controller_is_a_diverged_episode(model: mujoco.MjModel) -> None:
@@ -224,3 +237,56 @@ def test_the_same_force_and_torque_noise_is_the_old_single_sigma_draw_for_draw(m
         got = loop.noise.apply(state)  # type: ignore[union-attr]
         for name in ("p_world", "v_world", "omega_body", "ft_wrench"):
             np.testing.assert_array_equal(getattr(got, name), getattr(expected, name), err_msg=name)
+
+
+class Believing(TrackingTask):
+    """Tracks home while its belief changes: ``beliefs[k]`` during control step k (from 1)."""
+
+    capabilities: ClassVar[Capabilities] = Capabilities(belief=True)
+
+    def __init__(self, beliefs: list[object]) -> None:
+        super().__init__(sequence=[HOME] * len(beliefs))
+        self.beliefs = beliefs
+        self.reads = 0
+
+    @property
+    def belief(self) -> Any:
+        self.reads += 1
+        return self.beliefs[self._index - 1]
+
+
+class Listening(PDController):
+    """A PD law that keeps every belief it hears."""
+
+    observes_belief = True
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        super().__init__(model, PDConfig(control_dt=0.001))
+        self.heard: list[object] = []
+
+    def observe_belief(self, belief: object) -> None:
+        self.heard.append(belief)
+
+
+def test_the_loop_hands_each_new_belief_to_a_controller_that_observes_beliefs(model: mujoco.MjModel) -> None:
+    first, second = object(), object()
+    task = Believing([first, first, second, second, second])
+    controller = Listening(model)
+    loop = Loop(model=model, controller=controller, task=task, scene=SceneConfig())
+    loop.reset(np.random.default_rng(0))
+    assert loop.run(max_steps=100).status == "success"  # the sequence ran out
+    assert controller.heard == [first, second] and controller.heard[0] is first
+
+
+def test_the_loop_reads_no_belief_for_a_controller_that_does_not_observe_them(model: mujoco.MjModel) -> None:
+    task = Believing([object()] * 5)
+    loop = make(model, task)
+    loop.reset(np.random.default_rng(0))
+    loop.run(max_steps=100)
+    assert loop.steps == 5 and task.reads == 0
+    listening = Listening(model)  # and a task without the capability states no belief
+    tracking = TrackingTask(sequence=[HOME] * 5)
+    loop = Loop(model=model, controller=listening, task=tracking, scene=SceneConfig())
+    loop.reset(np.random.default_rng(0))
+    loop.run(max_steps=100)
+    assert loop.steps == 5 and listening.heard == []

@@ -10,6 +10,7 @@ its class; :func:`register_strategy` adds one from outside the package.
 from __future__ import annotations
 
 from peg_ctrl.errors import ConfigError
+from peg_ctrl.tasks.base import TaskSpec
 from peg_ctrl.tasks.strategies.align import AlignConfig, AlignStrategy
 from peg_ctrl.tasks.strategies.base import (
     DEFAULT_STRATEGY,
@@ -61,10 +62,9 @@ def strategy_names() -> list[str]:
     return list(STRATEGIES)
 
 
-def strategy_name(task: object) -> str:
+def strategy_name(task: TaskSpec) -> str:
     """The name of the strategy a task config runs ("" for a task without strategies)."""
-    strategy = getattr(task, "strategy", None)
-    return strategy.name if isinstance(strategy, StrategyConfig) else ""
+    return task.strategy_name
 
 
 def register_strategy(config_cls: type[StrategyConfig], *, replace: bool = False) -> None:
