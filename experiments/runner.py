@@ -5,9 +5,12 @@ Layout of ``out_dir``::
     experiment.json         the resolved experiment (every default filled in)
     episodes/<key>/         one episode: summary.json, config.json, log.jsonl, forces.npz
     episodes.csv/.parquet   one row per episode: the arm (controller/strategy), the varied values
-                            (clearance, seed, grid cells) and every metric of summary.json
+                            (clearance, seed, grid cells) and every column of summary.json that
+                            the episode record declares (peg_ctrl.run.result)
     summary.csv             per arm x planner x clearance: success rate with a 95 % Wilson
-                            interval, peak force median / p95, time to insert, failure reasons
+                            interval, the metrics the record declares a summary for (peak force
+                            median / p95, time to insert, ...), failure reasons
+    run_time.json           the sweep's run time, summed over the invocations that ran episodes
     report.md, *.png        the tables and plots
 
 An episode whose ``summary.json`` exists (and was not interrupted) is done: rerunning the same
@@ -30,7 +33,7 @@ from peg_ctrl.config import to_dict
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
 from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_stale_temps, to_json
-from peg_ctrl.run.episode import COST_FIELDS
+from peg_ctrl.run.result import result_columns
 from peg_ctrl.run.workers import worker_pool
 
 __all__ = [
@@ -42,39 +45,12 @@ __all__ = [
     "check_same_experiment",
     "experiment_text",
     "EPISODE_COLUMNS",
+    "episode_columns",
     "BACKENDS",
 ]
 
-# episodes.csv columns copied from each episode's summary.json.
-_SUMMARY_COLUMNS = (
-    "status",
-    "reason",
-    "phase",
-    "peak_contact_force_n",
-    "peak_any_contact_force_n",
-    "time_to_insert_s",
-    "first_contact_s",
-    "contact_to_seat_s",
-    "contact_impulse_ns",
-    "max_tilt_rad",
-    "search_distance_m",
-    "end_state",
-    "insertion_depth_m",
-    "lateral_error_m",
-    "tilt_rad",
-    "max_penetration_m",
-    "resting_penetration_m",
-    "grip_penetration_m",
-    "peg_slip_m",
-    "physics",
-    "total_timesteps",
-    "sim_time_s",
-    "wall_time_s",
-    *COST_FIELDS,
-    "phantom_contacts",
-)
-
-EPISODE_COLUMNS = (
+# episodes.csv's columns of the experiment's job, before and after the episode record's own.
+_JOB_COLUMNS = (
     "key",
     "arm",
     "controller",
@@ -87,9 +63,18 @@ EPISODE_COLUMNS = (
     "peg_mass_scale",
     "friction_scale",
     "gain_scale",
-    *_SUMMARY_COLUMNS,
-    "log_path",
 )
+_LAST_COLUMNS = ("log_path",)
+
+
+def episode_columns() -> tuple[str, ...]:
+    """The columns of ``episodes.csv`` (before the experiment's grid keys): the job's, then
+    every column the episode record declares (:func:`~peg_ctrl.run.result.result_columns`, in
+    its field order), then the episode's log."""
+    return (*_JOB_COLUMNS, *result_columns(), *_LAST_COLUMNS)
+
+
+EPISODE_COLUMNS = episode_columns()
 
 
 def _run_one(args: tuple[str, dict[str, Any], str]) -> dict[str, Any]:
@@ -319,10 +304,14 @@ def _sweep(
         # are written; the report only for a complete sweep.
         rows = collect_rows(jobs, out_dir)
         write_tables(rows, out_dir)
+        if tasks:  # a resumed sweep's run time is the sum over its invocations
+            from peg_ctrl.experiments.report.run_time import add_run_time
+
+            add_run_time(out_dir, time.perf_counter() - started)
     if report:
         from peg_ctrl.experiments.report import write_report
 
-        write_report(out_dir, elapsed_s=time.perf_counter() - started)
+        write_report(out_dir)
     return rows
 
 
@@ -330,6 +319,7 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
     """One row per finished episode, in job order, from the episodes' ``summary.json``."""
     from peg_ctrl.run.episode import domain_draw
 
+    record = result_columns()
     rows = []
     for job in jobs:
         path = out_dir / "episodes" / job.key / "summary.json"
@@ -349,7 +339,7 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
                 "clearance_m": job.clearance,
                 "seed": job.seed,
                 **draw,
-                **{name: s.get(name) for name in _SUMMARY_COLUMNS},
+                **{name: s.get(name) for name in record},
                 "log_path": str(Path("episodes") / job.key / "log.jsonl"),
                 **job.cell,
             }
@@ -417,9 +407,10 @@ def refresh_tables(out_dir: Path) -> list[str]:
 
 
 def columns(rows: list[dict[str, Any]]) -> list[str]:
-    """:data:`EPISODE_COLUMNS` and the experiment's grid keys (``task.lateral_error``, ...)."""
-    extra = [k for k in (rows[0] if rows else {}) if k not in EPISODE_COLUMNS]
-    return [*EPISODE_COLUMNS, *extra]
+    """:func:`episode_columns` and the experiment's grid keys (``task.lateral_error``, ...)."""
+    known = episode_columns()
+    extra = [k for k in (rows[0] if rows else {}) if k not in known]
+    return [*known, *extra]
 
 
 def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
@@ -429,7 +420,7 @@ def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
     import csv
     import io
 
-    from peg_ctrl.experiments.report import summarise
+    from peg_ctrl.experiments.stats import summarise
 
     names = columns(rows)
     text = io.StringIO(newline="")

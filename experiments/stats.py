@@ -3,9 +3,13 @@
 - Success: Wilson 95 % intervals per arm (:func:`wilson_interval`, ``scipy.stats.binomtest``);
   pairwise Boschloo exact tests (two-sided, more powerful than Fisher's for 2x2 tables with fixed
   group sizes), Holm-corrected over all pairs compared at one clearance.
-- Peak force and time to insert (for held insertion: from first contact to seated): the median
-  with a 95 % bootstrap interval (percentile method, fixed seed, ``scipy.stats.bootstrap``) per
-  arm; pairwise two-sided Mann-Whitney U tests, Holm-corrected likewise.
+- Peak force and time to insert (for a task that inserts with a strategy from its first contact,
+  the held insertion: from first contact to seated): the median with a 95 % bootstrap interval
+  (percentile method, fixed seed, ``scipy.stats.bootstrap``) per arm; pairwise two-sided
+  Mann-Whitney U tests, Holm-corrected likewise.
+- The summary of a sweep (:func:`summarise`, ``summary.csv``): per arm, planner and clearance,
+  the success rate and every metric the episode record declares a summary for
+  (:mod:`peg_ctrl.run.result`).
 
 Every p-value reported is the Holm-adjusted one; a pair "differs" in a metric when it is below
 ``ALPHA``. Nothing is tested with fewer than two samples per side (the entry is then None).
@@ -22,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from peg_ctrl.errors import ConfigError
+from peg_ctrl.run.result import MetricField, flag_columns, numeric_columns, summarised
 
 __all__ = [
     "ALPHA",
@@ -31,6 +36,14 @@ __all__ = [
     "location_test",
     "median_ci",
     "episodes_frame",
+    "number_columns",
+    "numbers",
+    "inserts_from_contact",
+    "compared_time",
+    "summarise",
+    "summary_columns",
+    "metric_summary",
+    "success_by_level",
     "PairComparison",
     "compare_arms",
 ]
@@ -129,8 +142,9 @@ def median_ci(values: Sequence[float], *, seed: int = 0) -> tuple[float | None, 
 
 def episodes_frame(rows: Sequence[dict[str, Any]] | Any) -> Any:
     """``episodes.csv`` rows (dicts of strings or numbers, or a DataFrame) as a pandas DataFrame
-    with the numeric metric columns as floats (blank: NaN) and an ``arm`` column (the row's
-    ``arm``, else its ``controller``)."""
+    with the clearance and the episode record's number columns as floats (blank: NaN), its flag
+    columns as 1.0/0.0 (blank: NaN), and an ``arm`` column (the row's ``arm``, else its
+    ``controller``)."""
     import pandas as pd
 
     df = rows.copy() if isinstance(rows, pd.DataFrame) else pd.DataFrame(list(rows))
@@ -138,20 +152,169 @@ def episodes_frame(rows: Sequence[dict[str, Any]] | Any) -> Any:
     df["arm"] = [
         str(a) if isinstance(a, str) and a else str(c) for a, c in zip(arm, df["controller"], strict=True)
     ]
-    for column in _NUMERIC:
+    for column in number_columns():
         if column in df:
-            df[column] = pd.to_numeric(df[column].replace("", np.nan), errors="coerce").astype(float)
+            df[column] = numbers(df[column])
+    for column in flag_columns():
+        if column in df:
+            flags = {"true": 1.0, "false": 0.0, "1": 1.0, "0": 0.0}
+            df[column] = [flags.get(str(v).lower(), np.nan) for v in df[column]]
     return df
 
 
-# Metric columns of episodes.csv read as numbers.
-_NUMERIC = (
-    "clearance_m",
-    "peak_contact_force_n",
-    "time_to_insert_s",
-    "contact_to_seat_s",
-    "contact_impulse_ns",
-)
+def number_columns() -> tuple[str, ...]:
+    """The columns of ``episodes.csv`` that hold numbers: the clearance and the episode record's
+    number fields (:func:`~peg_ctrl.run.result.numeric_columns`)."""
+    return ("clearance_m", *numeric_columns())
+
+
+def numbers(series: Any) -> Any:
+    """A column as floats: a blank or a text that is not a number is NaN."""
+    import pandas as pd
+
+    return pd.to_numeric(series.replace("", np.nan), errors="coerce").astype(float)
+
+
+def inserts_from_contact(df: Any) -> Any:
+    """Per row of an :func:`episodes_frame`, whether its task inserts with a strategy from the
+    first contact on (its ``strategy`` is not blank: the held insertion starts at the hole, so
+    its start and approach take the same time in every arm); such an episode's insertion is timed
+    and aligned from its first contact."""
+    import pandas as pd
+
+    strategy = df["strategy"] if "strategy" in df else pd.Series("", index=df.index)
+    return strategy.fillna("").astype(str) != ""
+
+
+def compared_time(df: Any) -> Any:
+    """Per row of an :func:`episodes_frame`, the time its insertion is compared by [s]: from the
+    first contact to seated where the episode has it and inserts from its first contact
+    (:func:`inserts_from_contact`), else the time to insert."""
+    import pandas as pd
+
+    seat = df["contact_to_seat_s"] if "contact_to_seat_s" in df else pd.Series(np.nan, index=df.index)
+    return df["time_to_insert_s"].where(~inserts_from_contact(df) | seat.isna(), seat)
+
+
+def summarise(rows: Sequence[dict[str, Any]] | Any) -> list[dict[str, Any]]:
+    """Per arm (controller/strategy) x planner x clearance, in order of first appearance: the
+    episodes, the success rate with its 95 % Wilson interval, each metric the episode record
+    declares a :class:`~peg_ctrl.run.result.Summary` for (its median, bootstrap interval, p95,
+    share within a bound, rate, over all episodes or the successes), and the failure reasons.
+
+    Columns (``summary.csv``): ``controller`` (the arm), ``planner``, ``clearance_m``,
+    ``episodes``, ``successes``, ``success_rate``, ``success_ci95_low``/``_high``, the metrics'
+    (named as :class:`~peg_ctrl.run.result.Summary` says) and ``failure_reasons``.
+    """
+    if len(rows) == 0:
+        return []
+    df = episodes_frame(rows)
+    df["won"] = df["status"] == "success"
+    metrics = summarised()
+    out = []
+    for (arm, planner, clearance), group in df.groupby(["arm", "planner", "clearance_m"], sort=False):
+        n = len(group)
+        wins = int(group["won"].sum())
+        lo, hi = wilson_interval(wins, n)
+        row: dict[str, Any] = {
+            "controller": str(arm),
+            "planner": str(planner),
+            "clearance_m": float(clearance),
+            "episodes": n,
+            "successes": wins,
+            "success_rate": wins / n,
+            "success_ci95_low": lo,
+            "success_ci95_high": hi,
+        }
+        for field in metrics:
+            row.update(metric_summary(group, field))
+        reasons = group.loc[~group["won"], "reason"].value_counts().sort_index()
+        row["failure_reasons"] = ";".join(f"{k}:{v}" for k, v in reasons.items())
+        out.append(row)
+    return out
+
+
+def summary_columns(field: MetricField) -> dict[str, str]:
+    """The columns of ``summary.csv`` that ``field``'s :class:`~peg_ctrl.run.result.Summary`
+    makes, by the statistic each holds (``median``, ``ci_low``, ``ci_high``, ``p95``,
+    ``within``, ``rate``, ``rate_low``, ``rate_high``)."""
+    summary = field.metric.summary
+    assert summary is not None
+    stem, unit = field.stem, f"_{field.suffix}" if field.suffix else ""
+    names: dict[str, str] = {}
+    for stat in summary.stats:
+        if stat == "median":
+            names["median"] = f"{stem}_median{unit}"
+        elif stat == "ci":
+            names["ci_low"] = f"{stem}_median_ci95_low{unit}"
+            names["ci_high"] = f"{stem}_median_ci95_high{unit}"
+        elif stat == "p95":
+            names["p95"] = f"{stem}_p95{unit}"
+        else:  # rate
+            names.update(
+                rate=f"{stem}_rate", rate_low=f"{stem}_rate_ci95_low", rate_high=f"{stem}_rate_ci95_high"
+            )
+    if summary.within is not None:
+        names["within"] = f"{stem}_within_{summary.within:g}{field.suffix}"
+    return names
+
+
+def metric_summary(group: Any, field: MetricField) -> dict[str, float | None]:
+    """``field``'s statistics over one group of :func:`episodes_frame` rows (its successes
+    only, if its summary says so), by their :func:`summary_columns` names; None where there is
+    no finite value."""
+    summary = field.metric.summary
+    assert summary is not None
+    names = summary_columns(field)
+    if field.name in group:
+        picked = group.loc[group["won"], field.name] if summary.successes else group[field.name]
+        x = np.asarray([v for v in picked.tolist() if v is not None and math.isfinite(v)], dtype=float)
+    else:  # an older episodes.csv without the column
+        x = np.zeros(0)
+    stats: dict[str, float | None] = dict.fromkeys(names)
+    if len(x):
+        if "ci_low" in names:
+            stats["median"], stats["ci_low"], stats["ci_high"] = median_ci(x.tolist())
+        elif "median" in names:
+            stats["median"] = float(np.median(x))
+        if "p95" in names:
+            stats["p95"] = float(np.percentile(x, 95))
+        if "within" in names:
+            stats["within"] = float(np.mean(x <= summary.within))
+        if "rate" in names:
+            k = int(np.count_nonzero(x))
+            stats["rate"] = k / len(x)
+            stats["rate_low"], stats["rate_high"] = wilson_interval(k, len(x))
+    return {names[k]: v for k, v in stats.items()}
+
+
+def success_by_level(df: Any, column: str, *, max_levels: int = 6) -> Any:
+    """Per arm and level of ``column`` of an :func:`episodes_frame` with a ``won`` column: x
+    (the level, or the median of a quartile bin when there are more than ``max_levels`` numeric
+    levels), successes ``k`` of ``n``, ``rate`` and its Wilson interval ``low``/``high``. Named
+    levels (a sensor preset) are at x = 0, 1, ... in the order they first appear, their names in
+    ``attrs["labels"]``; ``attrs["binned"]`` says whether the levels were binned."""
+    import pandas as pd
+
+    values = numbers(df[column])
+    labels: list[str] = []
+    if values.isna().any():  # named levels: at 0, 1, ... in the file's order
+        labels = list(dict.fromkeys(df[column].astype(str)))
+        values = df[column].astype(str).map({v: float(i) for i, v in enumerate(labels)})
+    binned = not labels and values.nunique() > max_levels
+    if binned:
+        bins = pd.qcut(values, q=4, duplicates="drop")
+        x = values.groupby(bins, observed=True).transform("median")
+    else:
+        x = values
+    table = df.assign(x=x).groupby(["arm", "x"], sort=True)["won"].agg(k="sum", n="count").reset_index()
+    ci = [wilson_interval(int(k), int(n)) for k, n in zip(table["k"], table["n"], strict=True)]
+    table["rate"] = table["k"] / table["n"]
+    table["low"] = [c[0] for c in ci]
+    table["high"] = [c[1] for c in ci]
+    table.attrs["binned"] = binned
+    table.attrs["labels"] = labels
+    return table
 
 
 @dataclasses.dataclass(frozen=True)
@@ -183,18 +346,12 @@ class PairComparison:
 def compare_arms(rows: Sequence[dict[str, Any]] | Any) -> list[PairComparison]:
     """Every pair of arms (``arm`` or ``controller``, + ``planner``, of episodes.csv rows or
     their :func:`episodes_frame`) at each clearance, largest clearance first."""
-    import pandas as pd
-
     df = episodes_frame(rows)
     if df.empty:
         return []
     df["pair_arm"] = df["arm"] + "+" + df["planner"].astype(str)
     df["won"] = df["status"] == "success"
-    # Time from the first contact to seated where the episode has it (held insertion: its
-    # start and approach take the same time in every arm), else the time to insert.
-    seat = df.get("contact_to_seat_s", pd.Series(np.nan, index=df.index))
-    held = df.get("task", pd.Series("", index=df.index)) == "held_insertion"
-    df["compared_time"] = df["time_to_insert_s"].where(~held | seat.isna(), seat)
+    df["compared_time"] = compared_time(df)
     out = []
     for clearance, at in sorted(df.groupby("clearance_m", sort=False), key=lambda g: -g[0]):
         arms = {

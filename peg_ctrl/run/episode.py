@@ -43,6 +43,7 @@ from peg_ctrl.run.recorders import (
     TraceRecorder,
     VideoRecorder,
 )
+from peg_ctrl.run.result import COST_FIELDS, WALL_CLOCK_FIELDS, EpisodeResult
 from peg_ctrl.sim.assets import AssetParams
 from peg_ctrl.sim.ft_model import FTSensorModel, ft_preset
 from peg_ctrl.sim.jaw import load_default
@@ -208,96 +209,6 @@ class EpisodeConfig:
 def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
     """Build an :class:`EpisodeConfig` from plain data; ``controller: {name: pd, kp_pos: ...}``."""
     return load(EpisodeConfig, data)
-
-
-# The summary's fields of what the control costs (see EpisodeResult; columns of a sweep's table).
-COST_FIELDS = (
-    "control_time_p50_s",
-    "control_time_p99_s",
-    "solve_time_p50_s",
-    "solve_time_p99_s",
-    "solve_period_s",
-    "solve_real_time_factor",
-)
-# Summary fields measured in wall time: they differ between two runs of the same episode.
-WALL_CLOCK_FIELDS = ("wall_time_s", *(f for f in COST_FIELDS if f != "solve_period_s"), "solver_timing")
-
-
-@dataclasses.dataclass
-class EpisodeResult:
-    """The episode record (also written as ``summary.json``)."""
-
-    status: str  # "success" or "failure" ("interrupted" on Ctrl-C)
-    reason: str  # "" on success, else one of FAILURE_REASONS
-    phase: str  # phase when the episode ended
-    controller: str
-    planner: str
-    physics: str  # the physics profile
-    task: str  # the task's name
-    strategy: str  # the insertion strategy ("" for a task without one)
-    seed: int
-    total_timesteps: int
-    sim_time_s: float
-    wall_time_s: float
-    peak_contact_force_n: float  # peg-block
-    peak_any_contact_force_n: float
-    # The peg in the hole; None (null) when it is not at the hole (end_state "not_at_hole", see
-    # peg_ctrl.tasks.monitors.InsertionMeasure.at_hole): a lying peg has no depth in the bore.
-    insertion_depth_m: float | None
-    lateral_error_m: float | None
-    tilt_rad: float | None
-    max_penetration_m: float  # peg-block and peg-table, whole episode
-    resting_penetration_m: float  # peg's contacts at the end
-    grip_penetration_m: float  # pads into the peg, whole episode
-    peg_slip_m: float  # peg motion relative to the pad while held
-    time_to_insert_s: float | None
-    first_contact_s: float | None  # first peg-block contact
-    contact_to_seat_s: float | None  # from the first contact to the start of the seated hold
-    contact_impulse_ns: float  # integral of the peg-block force from the first contact [N s]
-    max_tilt_rad: float | None  # largest peg tilt from the first contact on (None: no contact)
-    search_distance_m: float  # lateral travel of the peg's lower end from the first contact on
-    end_state: str  # seated, missed, jammed, wedged or not_at_hole (monitors.episode_end_state)
-    detail: str
-    log_path: str
-    trace_path: str
-    plot_path: str | None = None
-    video_path: str | None = None
-    phases: list[dict[str, Any]] = dataclasses.field(default_factory=list)
-    # What the control costs, in wall time: per control step (the whole controller), and per
-    # solve of each of its optimisers (controllers.base.SolveTiming), with its period and its
-    # real-time factor (mean solve time over its period). The solve_time_* fields repeat the
-    # first optimiser's (the MPC's effort QP, the sampling MPC's planner, the IK's QP); None
-    # for a controller without one.
-    control_time_p50_s: float | None = None
-    control_time_p99_s: float | None = None
-    solve_time_p50_s: float | None = None
-    solve_time_p99_s: float | None = None
-    solve_period_s: float | None = None
-    solve_real_time_factor: float | None = None
-    solver_timing: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
-    phantom_contacts: int = 0  # physics steps whose collider returned a phantom (loop.PhantomGuard)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    def one_line(self) -> str:
-        if self.status == "success":
-            head = "SUCCESS"
-        else:
-            head = f"{self.status.upper()} ({self.reason} in {self.phase})"
-        tti = f", inserted at {self.time_to_insert_s:.2f} s" if self.time_to_insert_s is not None else ""
-        task = f"{self.task}/{self.strategy}" if self.strategy else self.task
-        depth = (
-            f"depth {self.insertion_depth_m * 1e3:.1f} mm"
-            if self.insertion_depth_m is not None
-            else "peg not at the hole"
-        )
-        return (
-            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({task}, {self.physics} physics), "
-            f"{self.total_timesteps} steps "
-            f"({self.sim_time_s:.2f} s sim, {self.wall_time_s:.1f} s wall){tti}, "
-            f"{depth}, peak peg-block force {self.peak_contact_force_n:.2f} N"
-        )
 
 
 @functools.lru_cache(maxsize=8)

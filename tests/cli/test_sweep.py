@@ -68,6 +68,8 @@ def test_a_resumed_sweep_counts_the_finished_episodes_as_done(
     config.write_text(TINY)
     out = tmp_path / "out"
     assert main(["sweep", str(config), "--workers", "1", "--out", str(out)]) == 0
+    first_s = json.loads((out / "run_time.json").read_text())["run_time_s"]
+    assert f"Run time {first_s:.0f} s." in (out / "report.md").read_text()
     (first, *_) = sorted((out / "episodes").iterdir())
     (first / "summary.json").unlink()  # one episode to run again
     capsys.readouterr()
@@ -76,6 +78,11 @@ def test_a_resumed_sweep_counts_the_finished_episodes_as_done(
     lines = capsys.readouterr().err.splitlines()
     assert lines[0] == "sweep tiny: 2/3 episodes (66%), 0 inserted, elapsed 0s"
     assert lines[-1].startswith("sweep tiny: 3/3 episodes (100%), 0 inserted, elapsed ")
+    # The report's run time is the sum over both invocations, not the last one's.
+    saved = json.loads((out / "run_time.json").read_text())
+    assert saved["invocations"] == 2 and saved["run_time_s"] > first_s
+    total = f"Run time {saved['run_time_s']:.0f} s over 2 invocations."
+    assert total in (out / "report.md").read_text()
 
 
 def test_progress_can_be_switched_off(

@@ -95,7 +95,7 @@ def test_jobs_are_keyed_by_their_full_config() -> None:
 
 def test_report_handles_all_successes(tmp_path: Path) -> None:
     """A 100 % group has a Wilson upper bound a hair below 1: the plot must still draw."""
-    from peg_ctrl.experiments.report import _plots, summarise
+    from peg_ctrl.experiments.report.plots import draw_plots
 
     rows = [
         {
@@ -112,14 +112,14 @@ def test_report_handles_all_successes(tmp_path: Path) -> None:
         for c in (0.001, 0.0001)
         for _ in range(10)
     ]
-    names = [name for _, name in _plots(tmp_path, rows, summarise(rows))]
+    names = [name for _, name in draw_plots(tmp_path, rows)]
     assert "success_vs_clearance.png" in names and (tmp_path / "success_vs_clearance.png").is_file()
 
 
 @pytest.mark.parametrize("n", [5, 10, 20])
 def test_success_vs_disturbance_handles_all_successes(tmp_path: Path, n: int) -> None:
     """5/5 has a Wilson upper bound a round-off below 1: the error bars must still draw."""
-    from peg_ctrl.experiments.report import _plots, summarise
+    from peg_ctrl.experiments.report.plots import draw_plots
 
     rows = [
         {
@@ -139,7 +139,7 @@ def test_success_vs_disturbance_handles_all_successes(tmp_path: Path, n: int) ->
         for e in (0.0005, 0.003)
         for _ in range(n)
     ]
-    names = [name for _, name in _plots(tmp_path, rows, summarise(rows))]
+    names = [name for _, name in draw_plots(tmp_path, rows)]
     assert "success_vs_disturbance.png" in names and (tmp_path / "success_vs_disturbance.png").is_file()
 
 
@@ -475,18 +475,17 @@ def test_swept_conditions_are_the_varied_columns() -> None:
 
 
 def test_success_table_counts_per_arm_and_level_with_wilson_intervals() -> None:
-    from peg_ctrl.experiments.report import _success_table
-    from peg_ctrl.experiments.stats import episodes_frame
+    from peg_ctrl.experiments.stats import episodes_frame, success_by_level
 
     df = episodes_frame(_contact_rows())
     df["won"] = df["status"] == "success"
-    table = _success_table(df, "task.lateral_error")
+    table = success_by_level(df, "task.lateral_error")
     row = table[(table["arm"] == "pd/spiral") & (table["x"] == 0.003)].iloc[0]
     assert (row["k"], row["n"], row["rate"]) == (2, 8, 0.25)
     assert (row["low"], row["high"]) == wilson_interval(2, 8)
     assert len(table) == 4 and not table.attrs["binned"]
     # Eight friction values (one per seed): four quartile bins per arm, at the bins' medians.
-    friction = _success_table(df, "friction_scale")
+    friction = success_by_level(df, "friction_scale")
     assert friction.attrs["binned"] and len(friction) == 8
     assert friction.groupby("arm")["n"].sum().tolist() == [16, 16]
     assert friction["x"].iloc[0] == pytest.approx(0.825)  # the median of 0.80 and 0.85
@@ -530,8 +529,8 @@ def _sensor_rows() -> list[dict]:
 
 
 def test_a_named_linked_axis_is_one_condition_and_a_large_grid_folds_onto_its_axes(tmp_path: Path) -> None:
-    from peg_ctrl.experiments.report import _success_table, swept_conditions, write_report
-    from peg_ctrl.experiments.stats import episodes_frame
+    from peg_ctrl.experiments.report import swept_conditions, write_report
+    from peg_ctrl.experiments.stats import episodes_frame, success_by_level
 
     df = episodes_frame(_sensor_rows())
     # The sensor is a condition (named levels); the hole noise moves with it, so it is left out.
@@ -543,7 +542,7 @@ def test_a_named_linked_axis_is_one_condition_and_a_large_grid_folds_onto_its_ax
         "friction_scale",
     ]
     df["won"] = df["status"] == "success"
-    table = _success_table(df, "domain.ft_sensor")
+    table = success_by_level(df, "domain.ft_sensor")
     assert table.attrs["labels"] == ["ideal", "forge"]
     forge = table[(table["arm"] == "pd/spiral") & (table["x"] == 1.0)].iloc[0]
     assert (forge["k"], forge["n"]) == (0, 8)
@@ -563,7 +562,7 @@ def test_a_named_linked_axis_is_one_condition_and_a_large_grid_folds_onto_its_ax
 def test_where_the_time_goes_is_the_median_phase_time_of_the_successes(tmp_path: Path) -> None:
     import json
 
-    from peg_ctrl.experiments.report import _phase_section
+    from peg_ctrl.experiments.report.sections import phase_section
 
     rows = []
     for i, (status, touch) in enumerate(
@@ -579,9 +578,9 @@ def test_where_the_time_goes_is_the_median_phase_time_of_the_successes(tmp_path:
         ]
         (tmp_path / log).parent.joinpath("summary.json").write_text(json.dumps({"phases": phases}))
         rows.append({"arm": "mpc/probe", "controller": "mpc", "status": status, "log_path": log})
-    lines = _phase_section(tmp_path, rows)
+    lines = phase_section(tmp_path, rows)
     assert "| mpc/probe | 3 | touch 0.40, insert 1.00 |" in lines  # settle and hold left out
-    assert _phase_section(tmp_path, [{**rows[0], "log_path": "episodes/gone/log.jsonl"}]) == []
+    assert phase_section(tmp_path, [{**rows[0], "log_path": "episodes/gone/log.jsonl"}]) == []
 
 
 def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction() -> None:
@@ -606,3 +605,101 @@ def test_contact_hard_gives_each_controller_its_strategies_and_sweeps_friction()
     job = next(j for j in jobs if j.arm == "mpc/align" and j.cell["scene.friction"] == 0.9)
     assert job.config.scene.friction == 0.9 and job.config.scene.assets.clearance == 0.00005
     assert job.config.controller.formulation == "contact"  # type: ignore[attr-defined]
+
+
+def test_a_float_field_added_to_the_result_reaches_episodes_csv_and_the_summary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One field with its metadata is all a new metric needs: the sweep's table, summary.csv
+    and the report's summary table follow from it."""
+    import dataclasses
+    import json
+
+    from peg_ctrl.experiments.report import write_report
+    from peg_ctrl.experiments.runner import collect_rows, write_tables
+    from peg_ctrl.run import result
+    from peg_ctrl.run.result import EpisodeResult, Summary, metric
+
+    extended = dataclasses.make_dataclass(
+        "Extended",
+        [
+            (
+                "squeeze_n",
+                float,
+                dataclasses.field(
+                    default=0.0, metadata=metric(unit="N", summary=Summary("squeeze", ("median", "p95")))
+                ),
+            ),
+            ("wobble_m", float, dataclasses.field(default=0.0)),  # no metadata: a column, not summarised
+        ],
+        bases=(EpisodeResult,),
+    )
+    monkeypatch.setattr(result, "EpisodeResult", extended)
+    jobs = expand(
+        experiment_from_mapping({"name": "extended", "controllers": ["pd", "impedance"], "seeds": 3})
+    )
+    blank = {"number": 0.0, "text": "", "flag": False}
+    for i, job in enumerate(jobs):
+        fields: dict = {f.name: blank.get(f.kind) for f in result.metric_fields() if f.kind != "other"}
+        fields.update(
+            status="success",
+            seed=job.seed,
+            total_timesteps=10,
+            phantom_contacts=0,
+            trace_path="forces.npz",
+            squeeze_n=float(i + 1) * (10.0 if job.controller == "impedance" else 1.0),
+            wobble_m=0.001 * i,
+        )
+        record = extended(**fields)
+        (tmp_path / "episodes" / job.key).mkdir(parents=True)
+        (tmp_path / "episodes" / job.key / "summary.json").write_text(json.dumps(record.to_dict()))
+    write_tables(collect_rows(jobs, tmp_path), tmp_path)
+    with open(tmp_path / "episodes.csv", newline="") as fh:
+        reader = csv.DictReader(fh)
+        header, rows = list(reader.fieldnames or []), list(reader)
+    assert header[header.index("phantom_contacts") + 1 :] == ["squeeze_n", "wobble_m", "log_path"]
+    assert [float(r["squeeze_n"]) for r in rows] == [1.0, 2.0, 3.0, 40.0, 50.0, 60.0]
+    with open(tmp_path / "summary.csv", newline="") as fh:
+        summary = {r["controller"]: r for r in csv.DictReader(fh)}
+    assert float(summary["pd"]["squeeze_median_n"]) == 2.0
+    assert float(summary["impedance"]["squeeze_p95_n"]) == pytest.approx(59.0)
+    assert not any("wobble" in name for name in summary["pd"])
+    report = write_report(tmp_path).read_text().splitlines()
+    head = next(line for line in report if line.startswith("| arm | planner |")).split(" | ")
+    pd_row = next(line for line in report if line.startswith("| pd | ruckig |")).split(" | ")
+    assert pd_row[head.index("squeeze median [N]")] == "2" and pd_row[head.index("squeeze p95 [N]")] == "2.9"
+
+
+def test_the_run_time_is_summed_over_the_invocations(tmp_path: Path) -> None:
+    from peg_ctrl.experiments.report.run_time import RUN_TIME_FILE, add_run_time, run_time
+    from peg_ctrl.experiments.report.sections import header_section
+
+    assert run_time(tmp_path) is None
+    assert add_run_time(tmp_path, 100.0) == (100.0, 1)
+    assert add_run_time(tmp_path, 25.5) == (125.5, 2)
+    assert run_time(tmp_path) == (125.5, 2)
+    rows = [{"controller": "pd"}]
+    assert header_section({}, "x", rows, run_time(tmp_path))[2].endswith(
+        " Run time 126 s over 2 invocations."
+    )
+    assert header_section({}, "x", rows, (9.0, 1))[2].endswith(" Run time 9 s.")
+    assert "Run time" not in header_section({}, "x", rows, None)[2]
+    (tmp_path / RUN_TIME_FILE).write_text("{")  # damaged: not known, and replaced
+    assert run_time(tmp_path) is None and add_run_time(tmp_path, 1.0) == (1.0, 1)
+
+
+def test_the_report_names_the_task_from_the_data() -> None:
+    from peg_ctrl.experiments.report.plots import caption
+    from peg_ctrl.experiments.report.sections import comparison_section
+
+    rows = _contact_rows()
+    text = "\n".join(comparison_section(rows))
+    assert "(successes only; for held insertion the time from the first contact to seated)" in text
+    renamed = [{**r, "task": "peg_in_bore"} for r in rows]
+    assert "for peg in bore the time from the first contact" in "\n".join(comparison_section(renamed))
+    assert "aligned at the first peg-block contact (peg in bore) or at the start" in caption(
+        "force_profiles.png", renamed
+    )
+    plain = [{**r, "task": "pick_and_place", "strategy": ""} for r in rows]  # no strategy: from the start
+    assert "(successes only): Mann-Whitney U" in "\n".join(comparison_section(plain))
+    assert "aligned at the start of the insert (else release) phase" in caption("force_profiles.png", plain)

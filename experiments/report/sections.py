@@ -1,0 +1,337 @@
+"""The sections of a sweep's ``report.md``, each a list of Markdown lines: the header, the
+summary table (its columns from the metrics the episode record declares a summary for), success
+per grid cell or condition, which arms differ, where the time goes, what the control costs, and
+the plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from peg_ctrl.experiments.report.axes import arm_of, contact_tasks, episode_dir
+from peg_ctrl.experiments.report.plots import caption
+from peg_ctrl.experiments.stats import (
+    ALPHA,
+    compare_arms,
+    compared_time,
+    episodes_frame,
+    summary_columns,
+)
+from peg_ctrl.run.result import COST_FIELDS, summarised
+
+__all__ = [
+    "header_section",
+    "summary_section",
+    "cell_section",
+    "comparison_section",
+    "phase_section",
+    "cost_section",
+    "plots_section",
+]
+
+_MAX_CELL_COLUMNS = 12  # a larger grid's success table is folded onto its axes
+
+
+def _interval(lo: float | None, hi: float | None, fmt: str) -> str:
+    return "" if lo is None or hi is None else f"[{fmt.format(lo)}, {fmt.format(hi)}]"
+
+
+def _p(p: float | None) -> str:
+    if p is None:
+        return "–"
+    text = "< 0.001" if p < 0.001 else f"{p:.3f}"
+    return f"**{text}**" if p < ALPHA else text
+
+
+def comparison_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Pairwise tests between the arms at each clearance, and which pairs differ."""
+    pairs = compare_arms(rows)
+    if not pairs:
+        return []
+    tasks = contact_tasks(episodes_frame(rows))
+    seated = f"; for {tasks} the time from the first contact to seated" if tasks else ""
+    lines = [
+        "## Which arms differ",
+        "",
+        "Pairs of controller+planner at the same clearance. Success: Boschloo exact test; peak "
+        f"peg-block force and time to insert (successes only{seated}): Mann-Whitney U. All p-values are "
+        f"two-sided and Holm-corrected over the pairs at that clearance; bold: p < {ALPHA}. Intervals "
+        "in the summary: Wilson (success), percentile bootstrap of the median (force, time).",
+        "",
+        "| clearance [mm] | A | B | success A / B | p | force median A / B [N] | p | time median A / B [s] "
+        "| p | differ in |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def num(x: float | None, fmt: str) -> str:
+        return "–" if x is None else fmt.format(x)
+
+    for c in pairs:
+        lines.append(
+            f"| {c.clearance_m * 1e3:g} | {c.arm_a} | {c.arm_b} | {c.success_a} / {c.success_b} | "
+            f"{_p(c.p_success)} | {num(c.force_median_a, '{:.1f}')} / {num(c.force_median_b, '{:.1f}')} | "
+            f"{_p(c.p_force)} | {num(c.time_median_a, '{:.2f}')} / {num(c.time_median_b, '{:.2f}')} | "
+            f"{_p(c.p_time)} | {', '.join(c.differs()) or 'no difference found'} |"
+        )
+    return [*lines, ""]
+
+
+def cell_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Success and median peak force per arm in every grid cell (contact studies)."""
+    df = episodes_frame(rows)
+    keys = [k for k in df.columns if "." in k]  # the grid's dotted keys
+    if not keys:
+        return []
+    df["won"] = df["status"] == "success"
+    cells = list(dict.fromkeys(df[keys].itertuples(index=False, name=None)))
+    if len(cells) > _MAX_CELL_COLUMNS:
+        return _condition_section(df, keys)
+    by_cell = df.groupby(["arm", *keys], sort=False).agg(
+        wins=("won", "sum"), n=("won", "size"), force=("peak_contact_force_n", "median")
+    )
+    lines = [
+        "## Success per grid cell",
+        "",
+        "Successes / episodes, and the median peak peg-block force [N], per arm and cell.",
+        "",
+        "| arm | "
+        + " | ".join(
+            ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, c, strict=True)) for c in cells
+        )
+        + " |",
+        "|---|" + "---|" * len(cells),
+    ]
+    for arm in dict.fromkeys(df["arm"]):
+        cells_text = []
+        for c in cells:
+            key = (arm, *c)
+            if key in by_cell.index:
+                wins, n, force = by_cell.loc[key]
+                cells_text.append(f"{int(wins)}/{int(n)}, {force:.1f} N")
+            else:
+                cells_text.append("0/0, –")
+        lines.append(f"| {arm} | " + " | ".join(cells_text) + " |")
+    return [*lines, ""]
+
+
+def _condition_section(df: Any, keys: list[str]) -> list[str]:
+    """Success, median peak force and median contact-to-seated per arm at each level of each grid
+    key, pooled over the others: the per-cell table of a large grid, folded onto its axes."""
+    df["time"] = compared_time(df)
+    tasks = contact_tasks(df)
+    seated = f"; for a {tasks} from first contact to seated" if tasks else ""
+    levels = [(k, v) for k in keys for v in dict.fromkeys(df[k])]
+    lines = [
+        "## Success per condition",
+        "",
+        f"The grid has {len(set(df[keys].itertuples(index=False, name=None)))} cells; each column "
+        "pools the episodes at one level of one grid key (every cell per episode: episodes.csv). "
+        "Successes / episodes, median peak peg-block force [N], median time to insert [s] "
+        f"(successes{seated}).",
+        "",
+        "| arm | " + " | ".join(f"{k.split('.')[-1]}={v}" for k, v in levels) + " |",
+        "|---|" + "---|" * len(levels),
+    ]
+    for arm, group in df.groupby("arm", sort=False):
+        texts = []
+        for key, value in levels:
+            at = group[group[key] == value]
+            time = at.loc[at["won"], "time"].median()
+            texts.append(
+                f"{int(at['won'].sum())}/{len(at)}, {at['peak_contact_force_n'].median():.1f} N, "
+                + ("–" if np.isnan(time) else f"{time:.1f} s")
+            )
+        lines.append(f"| {arm} | " + " | ".join(texts) + " |")
+    return [*lines, ""]
+
+
+_UNTIMED_PHASES = ("start", "settle", "hold", "done")  # not part of getting the peg in
+
+
+def phase_section(out_dir: Path, rows: list[dict[str, Any]]) -> list[str]:
+    """Where the time goes: per arm, the median duration of each phase over its successes (read
+    from the episodes' summary.json; left out without them)."""
+    per_arm: dict[str, dict[str, list[float]]] = {}
+    for row in rows:
+        if row.get("status") != "success" or not row.get("log_path"):
+            continue
+        path = episode_dir(out_dir, row["log_path"]) / "summary.json"
+        if not path.is_file():
+            continue
+        phases = json.loads(path.read_text()).get("phases") or []
+        times = per_arm.setdefault(arm_of(row), {})
+        for ph in phases:
+            if ph["phase"] in _UNTIMED_PHASES or ph.get("t_end") is None:
+                continue
+            times.setdefault(ph["phase"], []).append(float(ph["t_end"]) - float(ph["t_start"]))
+    if not per_arm:
+        return []
+    lines = [
+        "## Where the time goes",
+        "",
+        "Per arm, the median time [s] each phase took over the arm's successes (in the order the "
+        "phases run; the first contact is in the first phase that touches: `touch` for probe and "
+        "align, `descend` or `push` for the others).",
+        "",
+        "| arm | successes | phases: median [s] |",
+        "|---|---|---|",
+    ]
+    for arm, times in per_arm.items():
+        n = max((len(v) for v in times.values()), default=0)
+        text = ", ".join(f"{name} {np.median(v):.2f}" for name, v in times.items())
+        lines.append(f"| {arm} | {n} | {text} |")
+    return [*lines, ""]
+
+
+def cost_section(rows: list[dict[str, Any]]) -> list[str]:
+    """Wall time of the controller per control step, and of its optimiser per solve, per arm."""
+    df = episodes_frame(rows)  # the cost columns as numbers
+    if "control_time_p50_s" not in df:
+        return []
+    for column in COST_FIELDS:
+        if column not in df:
+            df[column] = np.nan
+    if df["control_time_p50_s"].isna().all():
+        return []
+    lines = [
+        "## What the control costs",
+        "",
+        "Wall time per control step (the controller's whole update) and, for the controllers that "
+        "solve an optimisation problem, per solve (a QP, a replan), on one core of the machine that "
+        "ran the sweep: the median over the arm's episodes of each episode's p50 and p99, and the "
+        "largest p99. Real-time factor: the mean solve time over the solve period (below 1: the "
+        "optimiser keeps up with its own rate).",
+        "",
+        "| arm | control step p50 [µs] | p99 [µs] | solve period [ms] | solve p50 [µs] | solve p99 "
+        "[µs] (largest) | real-time factor |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for arm, group in df.groupby("arm", sort=False):
+        us = 1e6 * group[list(COST_FIELDS[:4])].median()
+        solve = group["solve_period_s"].dropna()
+        if solve.empty:
+            solver = "– | – | – | –"
+        else:
+            largest = 1e6 * group["solve_time_p99_s"].max()
+            solver = (
+                f"{1e3 * solve.median():g} | {us['solve_time_p50_s']:.0f} | "
+                f"{us['solve_time_p99_s']:.0f} ({largest:.0f}) | "
+                f"{group['solve_real_time_factor'].median():.2f}"
+            )
+        lines.append(
+            f"| {arm} | {us['control_time_p50_s']:.0f} | {us['control_time_p99_s']:.0f} | {solver} |"
+        )
+    return [*lines, ""]
+
+
+def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
+    head = "| " + " | ".join(title for _, title in columns) + " |"
+    rule = "|" + "|".join("---" for _ in columns) + "|"
+    lines = [head, rule]
+    for row in rows:
+        cells = []
+        for key, _ in columns:
+            value = row[key]
+            if isinstance(value, float):
+                cells.append(f"{value:.4g}")
+            else:
+                cells.append(str(value if value is not None else "–"))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def header_section(
+    exp: dict[str, Any],
+    default_name: str,
+    rows: list[dict[str, Any]],
+    run_time: tuple[float, int] | None,
+) -> list[str]:
+    """The title and one line of what was run; ``run_time``: the sweep's run time [s] and the
+    number of invocations it is summed over (None: not known)."""
+    clearances = ", ".join(f"{c * 1e3:g} mm" for c in exp.get("clearances", []))
+    took = ""
+    if run_time is not None:
+        seconds, invocations = run_time
+        took = f" Run time {seconds:.0f} s" + (
+            f" over {invocations} invocations." if invocations > 1 else "."
+        )
+    return [
+        f"# Experiment report: {exp.get('name', default_name)}",
+        "",
+        f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
+        f"planners {', '.join(exp.get('planners', []))}; clearances "
+        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
+        f"`{exp.get('physics', {}).get('profile', 'seed')}`." + took,
+        "",
+    ]
+
+
+def summary_section(summary: list[dict[str, Any]]) -> list[str]:
+    """Success, the summarised metrics (:func:`~peg_ctrl.run.result.summarised`) and the
+    failures per arm, planner and clearance; ``summary``: the rows of
+    :func:`~peg_ctrl.experiments.stats.summarise`."""
+    columns = [
+        ("controller", "arm"),
+        ("planner", "planner"),
+        ("clearance_mm", "clearance [mm]"),
+        ("success", "success"),
+        ("ci", "95 % CI"),
+    ]
+    cells = [
+        {
+            **s,
+            "success": f"{s['successes']}/{s['episodes']} ({100 * s['success_rate']:.0f} %)",
+            "ci": f"[{100 * s['success_ci95_low']:.0f}, {100 * s['success_ci95_high']:.0f}] %",
+            "clearance_mm": s["clearance_m"] * 1e3,
+        }
+        for s in summary
+    ]
+    for field in summarised():
+        names = summary_columns(field)
+        info = field.metric.summary
+        assert info is not None
+        label, unit = info.label, field.metric.unit
+        decimals = f"{{:.{info.decimals}f}}"
+        for stat, name in names.items():
+            title = ""
+            if stat == "median":
+                title = f"{label} median [{unit}]" if unit else f"{label} median"
+            elif stat == "ci_low":
+                title = "95 % CI"
+                for c in cells:
+                    c[name] = _interval(c[name], c[names["ci_high"]], decimals)
+            elif stat == "p95":
+                title = f"{label} p95 [{unit}]" if unit else f"{label} p95"
+            elif stat == "within":
+                title = f"{label} ≤ {info.within:g} {unit}".rstrip()
+                for c in cells:
+                    c[name] = "–" if c[name] is None else f"{100 * c[name]:.0f} %"
+            elif stat == "rate":
+                title = f"{label}"
+                for c in cells:
+                    c[name] = "–" if c[name] is None else f"{100 * c[name]:.0f} %"
+            elif stat == "rate_low":
+                title = "95 % CI"
+                for c in cells:
+                    c[name] = _interval(c[name], c[names["rate_high"]], "{:.0%}")
+            if title:
+                columns.append((name, title))
+    columns.append(("failure_reasons", "failures"))
+    return ["## Summary", "", _table(cells, columns), ""]
+
+
+def plots_section(rows: list[dict[str, Any]], plots: list[tuple[str, str]]) -> list[str]:
+    """Each plot with its caption (or why the force plots are missing)."""
+    parts: list[str] = []
+    if rows and "force_profiles.png" not in {name for _, name in plots}:
+        parts += [
+            "The episodes' force traces (`episodes/<key>/forces.npz`) are not in this directory, so "
+            "the force profiles and force against depth are not drawn.",
+            "",
+        ]
+    for title, name in plots:
+        parts += [f"## {title}", "", caption(name, rows), "", f"![{title}]({name})", ""]
+    return parts
