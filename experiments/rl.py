@@ -51,12 +51,13 @@ __all__ = [
 ]
 
 #: The environment the example trains on (keyword arguments of ``gymnasium.make``).
-#: A scripted straight descent seats the peg in under 1 s, so 2 s episodes (400 steps) leave room.
+#: A scripted straight descent seats the peg in under 1 s, so 2 s episodes (400 steps of 5 ms,
+#: Gymnasium's ``max_episode_steps``) leave room.
 ENV_KWARGS: dict[str, Any] = {
     "task": {"name": "held_insertion"},
     "fixed_jaw": True,
     "reward_mode": "shaped",
-    "time_limit_s": 2.0,
+    "max_episode_steps": 400,
 }
 ACTION_SETS = ("translation", "full")  # what the policy commands (see TranslationOnly)
 EVAL_SEED0 = 10_000  # evaluation episodes use seeds EVAL_SEED0, EVAL_SEED0 + 1, ... (never trained on)
@@ -92,7 +93,12 @@ class PPOSettings:
             raise ConfigError(f"actions must be one of {', '.join(ACTION_SETS)}, got {self.actions!r}")
 
     def env_kwargs(self) -> dict[str, Any]:
-        return {**ENV_KWARGS, **dict(self.env)}
+        """:data:`ENV_KWARGS` with :attr:`env` on top; the shaped reward's force penalty is
+        spread over the episode (``force_penalty_steps = max_episode_steps``) unless set."""
+        kwargs = {**ENV_KWARGS, **dict(self.env)}
+        if kwargs.get("reward_mode") == "shaped":
+            kwargs.setdefault("force_penalty_steps", kwargs["max_episode_steps"])
+        return kwargs
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """peg_ctrl: a physics-faithful peg-in-hole simulator in MuJoCo and a controller research framework.
 
 Importing the package registers the Gymnasium environment ``peg_ctrl/PegInsertion-v0``
-(:mod:`peg_ctrl.gym.env`, imported only when the environment is made).
+(:mod:`peg_ctrl.gym.env`, imported only when the environment is made), with Gymnasium's
+``TimeLimit`` of 1000 control periods.
 """
 
 import os as _os
@@ -97,4 +98,5 @@ if not any(isinstance(finder, _MovedModules) for finder in _sys.meta_path):
     _sys.meta_path.insert(0, _MovedModules())  # first: before any finder that sees stale files
 
 if "peg_ctrl/PegInsertion-v0" not in _registry:
-    _register(id="peg_ctrl/PegInsertion-v0", entry_point="peg_ctrl.gym.env:PegInsertionEnv")
+    # The time limit is Gymnasium's TimeLimit: 1000 control periods (peg_ctrl.gym.env.MAX_EPISODE_STEPS).
+    _register(id="peg_ctrl/PegInsertion-v0", entry_point="peg_ctrl.gym.make:make_env", max_episode_steps=1000)

@@ -189,3 +189,19 @@ def assert_one_line_error(proc: subprocess.CompletedProcess[str], message: str) 
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
     assert lines[0].startswith("peg-sim: error: ") and message in lines[0], lines[0]
+
+
+@pytest.fixture()
+def fake_triton(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """An importable stand-in ``triton`` package (its ``__init__.py`` is returned, empty), not
+    imported yet; afterwards whatever ``triton`` was imported before is back (PyTorch looks for
+    the real one in ``sys.modules``)."""
+    package = tmp_path / "fake_triton" / "triton"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    monkeypatch.syspath_prepend(str(package.parent))
+    saved = sys.modules.pop("triton", None)
+    yield package / "__init__.py"
+    sys.modules.pop("triton", None)
+    if saved is not None:
+        sys.modules["triton"] = saved

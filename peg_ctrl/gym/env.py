@@ -31,6 +31,9 @@ Action (``action_mode=``), ``float32``, shape ``(7,)``
     ``"absolute"``: the command API ``[x, y, z, roll, pitch, yaw, jaw_sep_m]`` (see
     :mod:`peg_ctrl.commands`) in the world frame, bounded by :data:`WORKSPACE` and ``[0, 0.085]``
     m. Actions outside the space are clipped; a non-finite action raises ``ValueError``.
+    The mode is an option of the environment, not a wrapper: a delta action is turned into a
+    target from the pose *measured* at that step, with its velocity as a feed-forward, which a
+    wrapper mapping it onto the absolute action (pose only) would lose.
 
 Observation, a ``Dict`` of ``float32`` arrays (world frame unless stated; quaternions ``[w, x,
 y, z]`` with ``w >= 0``)
@@ -47,8 +50,9 @@ y, z]`` with ``w >= 0``)
 Reward (``reward_mode=``)
     Built so that the undiscounted return orders the outcomes: **any failure < holding still
     until truncation < any success**, in both modes (``tests/gym/test_env.py`` checks it on
-    the physics). ``"sparse"`` (default): ``+1`` on the step the peg is seated, ``-1`` on the
-    step a monitor fails the episode, else 0. ``"shaped"``: ``+3`` seated, ``-3`` failed, plus
+    the physics). ``"sparse"`` (default, the environment's own reward): ``+1`` on the step the
+    peg is seated, ``-1`` on the step a monitor fails the episode, else 0. ``"shaped"``: the
+    wrapper :class:`~peg_ctrl.gym.wrappers.ShapedReward`, ``+3`` seated, ``-3`` failed, plus
     two bounded shaping terms on every step:
 
     - ``progress = closeness_now - closeness_before`` (potential-based shaping, Ng et al.
@@ -56,8 +60,10 @@ Reward (``reward_mode=``)
       the closeness gained, in ``[-1, 1]``); ``closeness = 1 - tanh(d_goal / 0.03 m)`` for
       ``held_insertion``, the mean of that and ``1 - tanh(d_reach / 0.1 m)`` for
       ``pick_and_place``;
-    - ``force_penalty = -0.5 * tanh(max(0, F - 10 N) / 10 N) / max_steps``, which sums to at
-      least -0.5 over an episode.
+    - ``force_penalty = -0.5 * tanh(max(0, F - 10 N) / 10 N) / force_penalty_steps``, which
+      sums to at least -0.5 over an episode of up to ``force_penalty_steps`` steps (default
+      1000, the registered time limit; pass ``force_penalty_steps=N`` with a longer
+      ``max_episode_steps=N``).
 
     ``d_goal`` [m] is the distance from the peg's lower end to the seated goal (the hole axis
     from ``success.min_depth`` below the mouth down), ``d_reach`` [m] the distance from the
@@ -66,15 +72,18 @@ Reward (``reward_mode=``)
     peg does not move), a failure at most -2. ``info["reward_terms"]`` has the parts: the
     factors ``goal``, ``reach`` (1 for ``held_insertion``), ``closeness`` (each in ``[0, 1]``)
     and the summands ``progress``, ``force_penalty``, ``success``, ``failure`` (their sum is
-    the reward).
+    the reward); the sparse reward's are ``success`` and ``failure``.
 
 Termination and truncation
     ``terminated`` when the peg is seated (``info["success"]``: depth ≥ ``success.min_depth``,
     lateral error ≤ ``success.max_lateral_error``, tilt ≤ ``success.max_tilt`` for
     ``success.consecutive_steps`` control steps) or a monitor fails the episode
     (``info["reason"]``: ``force_spike``, ``grasp_lost``, ``excessive_tilt`` or ``diverged``).
-    ``truncated`` after ``time_limit_s`` of simulated time (default 5 s for ``held_insertion``,
-    20 s for ``pick_and_place``). ``info`` also has ``depth_m``, ``lateral_error_m`` and
+    ``truncated`` comes from Gymnasium's ``TimeLimit``, which ``gymnasium.make`` puts around
+    the environment: after ``max_episode_steps`` control periods, registered 1000 (5 s with
+    the 5 ms controllers, 1 s with ``admittance``'s 1 ms); ``gymnasium.make(...,
+    max_episode_steps=N)`` sets another (4000 for the 20 s that ``pick_and_place`` needs). The
+    environment itself never truncates. ``info`` also has ``depth_m``, ``lateral_error_m`` and
     ``tilt_rad`` of the peg in the hole (NaN while the peg is not at the hole: lying, or beside
     the block), ``peg_block_force_n`` (the period's peak) and ``t`` [s].
 
@@ -92,7 +101,10 @@ Other keyword arguments of ``gymnasium.make``
     the other arguments override); ``randomize`` (the pick-and-place start pose, default True);
     ``fixed_jaw`` (``held_insertion`` only, default False: keep the jaw closed on the peg and
     ignore the action's ``jaw``, so that exploration cannot drop the peg);
-    ``render_mode`` (``"rgb_array"`` or ``"human"``), ``width`` and ``height`` [px].
+    ``render_mode`` (``"rgb_array"`` or ``"human"``), ``width`` and ``height`` [px];
+    ``force_penalty_steps`` (with ``reward_mode="shaped"``, see Reward). ``gymnasium.make``
+    passes them to :func:`peg_ctrl.gym.make.make_env`, which builds the environment and the
+    reward wrapper.
 
 Seeding
     ``reset(seed=s)`` seeds the environment's generator; each episode's start state, domain draw
@@ -121,9 +133,9 @@ from peg_ctrl.config import ConfigError, read_mapping
 from peg_ctrl.errors import CommandError, EpisodeFailure
 from peg_ctrl.run.episode import DomainConfig, EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.run.loop import Loop, StepInfo
-from peg_ctrl.run.recorders import FollowCamera
+from peg_ctrl.run.recorders import FollowCamera, offscreen_renderer
 from peg_ctrl.sim.rotations import quat_mul, rotate_inv
-from peg_ctrl.sim.state import BLOCK_PEG, ControlState, ft_world
+from peg_ctrl.sim.state import BLOCK_PEG, ft_world
 from peg_ctrl.tasks.base import (
     Capabilities,
     Evaluation,
@@ -136,31 +148,25 @@ from peg_ctrl.tasks.base import (
 
 __all__ = [
     "ENV_ID",
+    "MAX_EPISODE_STEPS",
     "PegInsertionEnv",
     "AgentTask",
     "WORKSPACE",
     "MAX_SPEED",
     "MAX_ANGULAR_SPEED",
     "ACTION_MODES",
-    "REWARD_MODES",
+    "SPARSE_REWARD",
 ]
 
 ENV_ID = "peg_ctrl/PegInsertion-v0"
+#: The registered time limit, in control periods: 5 s of the default ``pd`` controller's 5 ms.
+MAX_EPISODE_STEPS = 1000
 ACTION_MODES = ("delta", "absolute")
-REWARD_MODES = ("sparse", "shaped")
 #: Bounds of the commanded pinch point in absolute mode, ``(low, high)`` per axis [m].
 WORKSPACE = ((-0.45, -0.3, 0.0), (0.45, 0.3, 0.4))
 MAX_SPEED = 0.2  # [m/s] of a full delta action
 MAX_ANGULAR_SPEED = 2.0  # [rad/s] of a full delta action
-TIME_LIMIT_S = {"held_insertion": 5.0, "pick_and_place": 20.0}  # default episode length [s of sim]
-#: Terminal rewards ``(success, failure)`` per reward mode. The shaped mode's exceed twice its
-#: shaping's bound (progress in [-1, 1], force penalty in [-0.5, 0] per episode): any success
-#: >= 1.5 > 1 >= holding still >= -1.5 > -2 >= any failure.
-TERMINAL_REWARD = {"sparse": (1.0, -1.0), "shaped": (3.0, -3.0)}
-FORCE_FREE_N = 10.0  # the shaped reward penalises peg-block force above this [N]
-FORCE_PENALTY = 0.5  # the force penalty's bound over a whole episode
-GOAL_SCALE_M = 0.03  # distance of the peg's lower end from the seated goal at which closeness is 0.24
-REACH_SCALE_M = 0.1  # the same for the pinch point's distance from the peg (pick_and_place)
+SPARSE_REWARD = (1.0, -1.0)  # the environment's own reward: (seated, a monitor failed the episode)
 
 
 class AgentTask:
@@ -337,30 +343,22 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         randomize: bool = True,
         fixed_jaw: bool = False,
         action_mode: str = "delta",
-        reward_mode: str = "sparse",
-        time_limit_s: float | None = None,
         render_mode: str | None = None,
         width: int = 480,
         height: int = 480,
     ) -> None:
         self.action_mode = _choice(action_mode, ACTION_MODES, "action_mode")
-        self.reward_mode = _choice(reward_mode, REWARD_MODES, "reward_mode")
         self.render_mode = self._checked_render_mode(render_mode)
         self.cfg = _episode_config(config, task, controller, profile, disturbances, scene, randomize)
-        limit = TIME_LIMIT_S.get(self.cfg.task.name, 20.0) if time_limit_s is None else time_limit_s
-        if not (math.isfinite(limit) and limit > 0):
-            raise ConfigError(f"time_limit_s must be a positive number of seconds, got {time_limit_s!r}")
         self.width, self.height = int(width), int(height)
         self._randomized_domain = self.cfg.domain != DomainConfig()
         self._build(self.cfg)
         self.control_dt = self.loop.control_dt
-        self.max_steps = max(1, round(limit / self.control_dt))
-        m = self.cfg.success.min_depth
         a = self.cfg.scene.assets
         hx, hy = self.cfg.scene.hole_xy
         self.hole_pos = np.array([hx, hy, a.block_size[2]])
-        self._goal = self.hole_pos - np.array([0.0, 0.0, m])
-        self._reach = self.cfg.task.name == "pick_and_place"
+        #: The seated goal of the peg's lower end: the hole axis ``success.min_depth`` below the mouth.
+        self.goal_pos = self.hole_pos - np.array([0.0, 0.0, self.cfg.success.min_depth])
         if fixed_jaw and self.cfg.task.name != "held_insertion":
             raise ConfigError(
                 f"fixed_jaw=True needs task held_insertion (the peg starts in the hand), got task "
@@ -373,9 +371,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self._camera: FollowCamera | None = None
         self._viewer: Any = None
         self._wall0 = 0.0
-        self._steps = 0
         self._done = True
-        self._closeness_before = 0.0  # the shaped reward's potential at the last step
 
     def _checked_render_mode(self, render_mode: str | None) -> str | None:
         if render_mode is not None:
@@ -406,11 +402,9 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             self._build(dataclasses.replace(self.cfg, seed=episode_seed))
             self._close_renderers()
         obs = self.loop.reset(np.random.default_rng(episode_seed))
-        self._steps = 0
         self._done = False
         self._wall0 = time.perf_counter()
         m = self.task.insertion.measure(obs.peg)
-        self._closeness_before = self._closeness(self.loop.state())["closeness"]
         info = self._info(m, success=False, reason="")
         if self.render_mode == "human":
             self.render()
@@ -420,7 +414,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self, action: NDArray[np.float32]
     ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
         if self._done:
-            raise RuntimeError("step() after the episode ended; call reset()")
+            raise RuntimeError("step() after the episode terminated; call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.shape != (7,):
             raise CommandError(f"action must have shape (7,), got {np.shape(action)}")
@@ -436,16 +430,15 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             reason, terminated = failure.reason, True
             assert self.loop.peg is not None
             m = self.task.insertion.measure(self.loop.peg)
-        self._steps += 1
-        truncated = not terminated and self._steps >= self.max_steps
-        self._done = terminated or truncated
-        state = self.loop.state()
-        reward, terms = self._reward(state, success=success, failed=bool(reason))
+        self._done = terminated
+        win, lose = SPARSE_REWARD
+        terms = {"success": win * success, "failure": lose * bool(reason)}
         info = self._info(m, success=success, reason=reason)
         info["reward_terms"] = terms
         if self.render_mode == "human":
             self.render()
-        return self._observation(), reward, terminated, truncated, info
+        # The time limit is Gymnasium's TimeLimit around the environment: never truncated here.
+        return self._observation(), sum(terms.values()), terminated, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode == "rgb_array":
@@ -495,30 +488,6 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             "hole_pos": self.hole_pos.astype(f32),
         }
 
-    def _reward(self, s: ControlState, *, success: bool, failed: bool) -> tuple[float, dict[str, float]]:
-        win, lose = TERMINAL_REWARD[self.reward_mode]
-        terms = {"success": win * success, "failure": lose * failed}
-        if self.reward_mode == "shaped":
-            factors = self._closeness(s)
-            excess = max(0.0, self._last.block_force - FORCE_FREE_N) / FORCE_FREE_N
-            terms |= factors
-            terms["progress"] = factors["closeness"] - self._closeness_before
-            terms["force_penalty"] = -FORCE_PENALTY * math.tanh(excess) / self.max_steps
-            self._closeness_before = factors["closeness"]
-        return sum(terms[k] for k in ("success", "failure", "progress", "force_penalty") if k in terms), terms
-
-    def _closeness(self, s: ControlState) -> dict[str, float]:
-        """The shaped reward's potential and its factors, each in ``[0, 1]`` (1 at the goal)."""
-        peg = self.loop.peg
-        assert peg is not None
-        off = peg.bottom_world - self._goal
-        off[2] = max(0.0, off[2])  # deeper than min_depth is on the goal
-        goal = 1.0 - math.tanh(float(np.linalg.norm(off)) / GOAL_SCALE_M)
-        if not self._reach:
-            return {"goal": goal, "reach": 1.0, "closeness": goal}
-        reach = 1.0 - math.tanh(float(np.linalg.norm(s.p_world - peg.p_world)) / REACH_SCALE_M)
-        return {"goal": goal, "reach": reach, "closeness": 0.5 * (goal + reach)}
-
     def _info(self, m: Any, *, success: bool, reason: str) -> dict[str, Any]:
         depth, lateral, tilt = (math.nan if v is None else float(v) for v in m.hole_metrics())
         return {
@@ -533,7 +502,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
 
     def _render_rgb(self) -> NDArray[np.uint8]:
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            self._renderer = offscreen_renderer(self.model, self.height, self.width)
             self._camera = FollowCamera(self.model)
         assert self._camera is not None
         self._renderer.update_scene(self.data, camera=self._camera.update(self.data))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import importlib
+import importlib.util
 import math
 import os
 import struct
@@ -33,6 +35,7 @@ __all__ = [
     "VideoRecorder",
     "FollowCamera",
     "FOLLOW",
+    "offscreen_renderer",
     "CallbackRecorder",
     "step_record",
 ]
@@ -244,6 +247,20 @@ class FollowCamera:
 FOLLOW = "follow"
 
 
+def offscreen_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """A ``mujoco.Renderer`` of ``height`` x ``width`` [px], with Triton imported first if it is
+    installed.
+
+    Triton (which the CUDA build of PyTorch imports when it builds a model, e.g. Stable-Baselines3's
+    policy) crashes the process (exit 139 inside ``libtriton``) when it is first imported after an
+    EGL context exists; imported before the context, it is safe. Without Triton this only creates
+    the renderer.
+    """
+    if importlib.util.find_spec("triton") is not None:
+        importlib.import_module("triton")
+    return mujoco.Renderer(model, height, width)
+
+
 class VideoRecorder:
     """Offscreen video at ``fps`` [frames/s], written as MP4 (H.264) by :meth:`close`.
 
@@ -289,7 +306,7 @@ class VideoRecorder:
         self._period = 1.0 / fps
         self._next = 0.0
         self._follow = FollowCamera(model) if FOLLOW in self.views else None
-        self._renderer = mujoco.Renderer(model, *size)
+        self._renderer = offscreen_renderer(model, *size)
         self._tmp = temp_path(self.path)
         self._error: Exception | None = None
         try:

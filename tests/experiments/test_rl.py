@@ -21,7 +21,12 @@ pytestmark = pytest.mark.filterwarnings("ignore:.*Box observation space m.*:User
 
 def test_a_small_ppo_run_writes_curve_record_figure_and_policy(tmp_path: Path) -> None:
     settings = rl.PPOSettings(
-        timesteps=128, eval_every=64, eval_episodes=2, n_steps=64, batch_size=32, env={"time_limit_s": 0.05}
+        timesteps=128,
+        eval_every=64,
+        eval_episodes=2,
+        n_steps=64,
+        batch_size=32,
+        env={"max_episode_steps": 10},
     )
     record = rl.train(settings, tmp_path / "ppo", show_progress=False)
     out = tmp_path / "ppo"
@@ -33,7 +38,8 @@ def test_a_small_ppo_run_writes_curve_record_figure_and_policy(tmp_path: Path) -
         assert row["reasons"] == "truncated=2"
     saved = json.loads((out / "run.json").read_text())
     assert saved["timesteps"] == record["timesteps"] == 128
-    assert saved["env"]["fixed_jaw"] is True and saved["env"]["time_limit_s"] == 0.05
+    assert saved["env"]["fixed_jaw"] is True and saved["env"]["max_episode_steps"] == 10
+    assert saved["env"]["force_penalty_steps"] == 10  # the shaped reward follows the episode length
     assert saved["train_wall_s"] > 0 and saved["final"]["timesteps"] == 128
     assert (out / "learning_curve.png").stat().st_size > 10_000
     assert (out / "ppo.zip").is_file() and (out / "vecnormalize.pkl").is_file()
@@ -42,7 +48,9 @@ def test_a_small_ppo_run_writes_curve_record_figure_and_policy(tmp_path: Path) -
 def test_evaluation_normalises_observations_as_vecnormalize() -> None:
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    venv = VecNormalize(DummyVecEnv([lambda: rl.make_env(**rl.ENV_KWARGS)]), norm_obs=True, norm_reward=False)
+    venv = VecNormalize(
+        DummyVecEnv([lambda: rl.make_env(**rl.PPOSettings().env_kwargs())]), norm_obs=True, norm_reward=False
+    )
     venv.seed(0)
     venv.reset()
     for _ in range(20):  # update the running statistics
@@ -76,8 +84,17 @@ def test_command_line_refuses_bad_settings_with_exit_2(
     assert not (tmp_path / "x").exists()
 
 
+def test_the_example_env_is_a_2_s_time_limit_with_the_shaped_reward() -> None:
+    kwargs = rl.PPOSettings().env_kwargs()
+    assert kwargs["max_episode_steps"] == kwargs["force_penalty_steps"] == 400
+    env = rl.make_env(**kwargs)
+    assert env.spec.max_episode_steps == 400 and env.get_wrapper_attr("force_penalty_steps") == 400
+    assert rl.PPOSettings(env={"force_penalty_steps": 500}).env_kwargs()["force_penalty_steps"] == 500
+    env.close()
+
+
 def test_translation_only_holds_the_orientation_and_the_jaw() -> None:
-    env = rl.TranslationOnly(rl.make_env(actions="full", **rl.ENV_KWARGS))
+    env = rl.TranslationOnly(rl.make_env(actions="full", **rl.PPOSettings().env_kwargs()))
     assert env.action_space.shape == (3,)
     full = env.action(np.array([0.1, -0.2, -0.3], dtype=np.float32))
     np.testing.assert_array_equal(full, np.array([0.1, -0.2, -0.3, 0, 0, 0, 1], dtype=np.float32))

@@ -18,7 +18,8 @@ from gymnasium.utils.env_checker import check_env
 import peg_ctrl  # noqa: F401  (registers the environment)
 from peg_ctrl.config import ConfigError
 from peg_ctrl.errors import UnknownComponent
-from peg_ctrl.gym.env import ENV_ID, PegInsertionEnv
+from peg_ctrl.gym.env import ENV_ID, MAX_EPISODE_STEPS, PegInsertionEnv
+from peg_ctrl.gym.wrappers import ShapedReward
 from peg_ctrl.sim.state import ft_world
 
 # Velocities, forces and the peg's position have no physical bound, and the space says so.
@@ -43,7 +44,25 @@ def test_registered_on_import() -> None:
     assert ENV_ID in gym.registry
     env = gym.make(ENV_ID)
     assert isinstance(env.unwrapped, PegInsertionEnv)
+    assert isinstance(env, gym.wrappers.TimeLimit)  # Gymnasium's time limit, registered
+    assert env.spec.max_episode_steps == gym.spec(ENV_ID).max_episode_steps == MAX_EPISODE_STEPS == 1000
+    assert MAX_EPISODE_STEPS * env.unwrapped.control_dt == pytest.approx(5.0)  # 5 s with pd
     env.close()
+
+
+def test_reward_mode_selects_the_shaped_reward_wrapper() -> None:
+    env = gym.make(ENV_ID, reward_mode="shaped")
+    assert isinstance(env.env.env.env, ShapedReward)  # inside TimeLimit, order enforcer, checker
+    assert env.get_wrapper_attr("force_penalty_steps") == MAX_EPISODE_STEPS
+    assert not any(isinstance(e, ShapedReward) for e in _wrappers(gym.make(ENV_ID)))
+    env.close()
+
+
+def _wrappers(env: gym.Env) -> list[gym.Env]:
+    out = [env]
+    while isinstance(out[-1], gym.Wrapper):
+        out.append(out[-1].env)
+    return out
 
 
 def test_check_env_passes_without_a_display() -> None:
@@ -210,13 +229,26 @@ def test_opening_the_jaw_terminates_with_grasp_lost_or_tilt() -> None:
         env.step(up_open)
 
 
-def test_time_limit_truncates() -> None:
-    env = gym.make(ENV_ID, time_limit_s=0.05)  # 10 control steps at 200 Hz
+def test_max_episode_steps_truncates_the_gymnasium_way() -> None:
+    env = gym.make(ENV_ID, max_episode_steps=10)  # 0.05 s at 200 Hz
+    assert env.spec.max_episode_steps == 10
     env.reset(seed=0)
     hold = np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32)
     ends = [env.step(hold)[2:4] for _ in range(10)]
     assert ends[-1] == (False, True)
     assert all(e == (False, False) for e in ends[:-1])
+    assert env.unwrapped.step(hold)[2:4] == (False, False)  # the environment itself never truncates
+    env.reset(seed=0)  # TimeLimit counts again from the reset
+    assert [env.step(hold)[3] for _ in range(10)] == [False] * 9 + [True]
+
+
+def test_the_registered_time_limit_is_1000_steps() -> None:
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    hold = np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32)
+    truncated = [env.step(hold)[3] for _ in range(1000)]
+    assert truncated == [False] * 999 + [True]
+    assert env.unwrapped.data.time == pytest.approx(5.0)
 
 
 def test_shaped_reward_grows_as_the_peg_goes_in() -> None:
@@ -232,7 +264,8 @@ def test_shaped_reward_grows_as_the_peg_goes_in() -> None:
     assert info["success"]
     assert set(terms[-1]) == {"goal", "reach", "closeness", "progress", "force_penalty", "success", "failure"}
     assert terms[-1]["success"] == 3.0 and terms[-1]["failure"] == 0.0 and terms[-1]["reach"] == 1.0
-    max_steps = env.unwrapped.max_steps
+    max_steps = env.get_wrapper_attr("force_penalty_steps")
+    assert max_steps == 1000
     for t, r in zip(terms, rewards, strict=True):
         assert 0.0 <= t["goal"] == t["closeness"] <= 1.0
         assert -0.5 / max_steps <= t["force_penalty"] <= 0.0
@@ -245,13 +278,15 @@ def test_shaped_reward_grows_as_the_peg_goes_in() -> None:
 
 
 def test_pick_and_place_start_and_reach_term() -> None:
-    env = gym.make(ENV_ID, task="pick_and_place", reward_mode="shaped")
+    env = gym.make(
+        ENV_ID, task="pick_and_place", reward_mode="shaped", max_episode_steps=4000, force_penalty_steps=4000
+    )
     obs, _ = env.reset(seed=0)
     assert abs(obs["peg_pos"][2] - 0.01) < 2e-3  # lying on the table (radius 10 mm)
     _, _, _, _, info = env.step(np.zeros(7, dtype=np.float32))
     d = np.linalg.norm(obs["gripper_pos"] - obs["peg_pos"])
     assert info["reward_terms"]["reach"] == pytest.approx(1.0 - np.tanh(d / 0.1), rel=0.05)
-    assert env.unwrapped.max_steps == 4000  # 20 s at 200 Hz
+    assert env.spec.max_episode_steps == env.get_wrapper_attr("force_penalty_steps") == 4000  # 20 s at 200 Hz
 
 
 HOLD = np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32)  # stay, jaw closed
@@ -264,7 +299,8 @@ def _episode_return(mode: str, policy, seed: int = 0, **kwargs) -> tuple[float, 
         ENV_ID,
         reward_mode=mode,
         task={"name": "held_insertion", "lateral_error": 0.0005},
-        time_limit_s=2.0,
+        max_episode_steps=400,  # 2 s
+        **({"force_penalty_steps": 400} if mode == "shaped" else {}),
         **kwargs,
     )
     env.reset(seed=seed)
@@ -319,7 +355,13 @@ def test_fixed_jaw_keeps_the_peg_in_the_hand() -> None:
         ({"task": "stack"}, UnknownComponent, "stack"),
         ({"profile": "turbo"}, ConfigError, "turbo"),
         ({"disturbances": {"peg_mass_scale": [2, 1]}}, ConfigError, "peg_mass_scale"),
-        ({"time_limit_s": 0}, ConfigError, "time_limit_s"),
+        ({"time_limit_s": 2.0}, ConfigError, "time_limit_s is replaced by Gymnasium's max_episode_steps"),
+        ({"force_penalty_steps": 400}, ConfigError, "force_penalty_steps belongs to reward_mode='shaped'"),
+        (
+            {"reward_mode": "shaped", "force_penalty_steps": 0},
+            ConfigError,
+            "force_penalty_steps must be a positive integer, got 0",
+        ),
     ],
 )
 def test_bad_arguments_are_named(kwargs: dict, error: type, match: str) -> None:
@@ -354,3 +396,55 @@ def test_rgb_array_renders_headless_with_mujoco_gl_unset(tmp_path: Path) -> None
     assert backend in ("egl", "osmesa")
     assert (shape, dtype) == ("(48, 64, 3)", "uint8")
     assert int(brightest) > 0  # not a blank frame
+
+
+def test_shaped_reward_wrapped_by_hand_reads_the_time_limit() -> None:
+    """ShapedReward around a made environment spreads its force penalty over that
+    environment's max_episode_steps: the same rewards as reward_mode="shaped" with
+    force_penalty_steps set to it."""
+    by_hand = ShapedReward(gym.make(ENV_ID, max_episode_steps=400))
+    by_make = gym.make(ENV_ID, reward_mode="shaped", max_episode_steps=400, force_penalty_steps=400)
+    assert by_hand.force_penalty_steps == 400
+    rng = np.random.default_rng(3)
+    actions = [DOWN] * 40 + list(rng.uniform(-1, 1, size=(60, 7)).astype(np.float32))
+    by_hand.reset(seed=1)
+    by_make.reset(seed=1)
+    for a in actions:
+        x, y = by_hand.step(a), by_make.step(a)
+        assert x[1:4] == y[1:4]
+        assert x[4]["reward_terms"] == y[4]["reward_terms"]
+        if x[2] or x[3]:
+            break
+    assert {"progress", "force_penalty"} <= set(x[4]["reward_terms"])  # the shaped reward's terms
+
+
+def test_shaped_reward_needs_a_peg_insertion_env_and_a_length() -> None:
+    with pytest.raises(ConfigError, match="ShapedReward needs force_penalty_steps"):
+        ShapedReward(PegInsertionEnv())
+    assert ShapedReward(PegInsertionEnv(), force_penalty_steps=50).force_penalty_steps == 50
+    with pytest.raises(TypeError, match="ShapedReward wraps a PegInsertionEnv, got CartPoleEnv"):
+        ShapedReward(gym.make("CartPole-v1"))
+
+
+def test_rendering_imports_triton_before_the_first_renderer(
+    fake_triton: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With Triton installed (a stand-in package here), it is imported before the GL context
+    exists: the CUDA build of PyTorch importing it after crashes (docs/rl.md)."""
+    import mujoco
+
+    real = mujoco.Renderer
+    triton_loaded: list[bool] = []
+
+    def renderer(*args: object) -> mujoco.Renderer:
+        triton_loaded.append("triton" in sys.modules)
+        return real(*args)
+
+    monkeypatch.setattr(mujoco, "Renderer", renderer)
+    env = gym.make(ENV_ID, render_mode="rgb_array", width=64, height=48)
+    env.reset(seed=0)
+    assert "triton" not in sys.modules  # not at import or reset: only to render
+    frame = env.render()
+    assert triton_loaded == [True]
+    assert frame.shape == (48, 64, 3)
+    env.close()

@@ -130,3 +130,56 @@ def test_bad_video_settings_are_refused(tmp_path: Path, kwargs: dict, message: s
 
     with pytest.raises(ConfigError, match=message):
         VideoRecorder(compiled_model(EpisodeConfig().scene), tmp_path / "v.mp4", **kwargs)
+
+
+@pytest.fixture
+def render_log(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The order in which ``mujoco.Renderer`` (a stand-in: no GL context) is created and, logged
+    by :func:`_logging_triton`, ``triton`` imported."""
+    import sys
+    import types
+
+    log: list[str] = []
+    logger = types.ModuleType("peg_ctrl_test_log")
+    logger.append = log.append  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "peg_ctrl_test_log", logger)
+
+    class Renderer:
+        def __init__(self, model: mujoco.MjModel, height: int, width: int) -> None:
+            log.append("renderer")
+            self.size = (height, width)
+
+    monkeypatch.setattr(mujoco, "Renderer", Renderer)
+    return log
+
+
+def test_offscreen_renderer_imports_triton_before_the_context(
+    render_log: list[str], fake_triton: Path
+) -> None:
+    from peg_ctrl.run.recorders import offscreen_renderer
+
+    fake_triton.write_text("import sys\nsys.modules['peg_ctrl_test_log'].append('triton')\n")
+    model = mujoco.MjModel.from_xml_string("<mujoco/>")
+    renderer = offscreen_renderer(model, 48, 64)
+    assert render_log == ["triton", "renderer"]
+    assert renderer.size == (48, 64)
+    offscreen_renderer(model, 48, 64)  # imported once
+    assert render_log == ["triton", "renderer", "renderer"]
+
+
+def test_offscreen_renderer_without_triton_only_creates_the_renderer(
+    render_log: list[str], fake_triton: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``find_spec`` finds no Triton (the stand-in is hidden from it): nothing is imported."""
+    import importlib.util
+    import sys
+
+    from peg_ctrl.run.recorders import offscreen_renderer
+
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "triton" else real_find_spec(name, *a)
+    )
+    offscreen_renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 48, 64)
+    assert render_log == ["renderer"]
+    assert "triton" not in sys.modules
