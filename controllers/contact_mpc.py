@@ -59,6 +59,10 @@ moment axis reverses (beyond ``reversal_band``, or 3 sigma of the moment's noise
 whatever the delay; an axis that never reverses (the peg turning on its rim towards flat)
 keeps its full rate. The backoff restarts when the axis becomes moment-controlled again.
 
+In the terms of :mod:`peg_ctrl.controllers.prediction` (shared with the effort QP), ``y`` is the
+predicted trajectory of an integrator from ``y_0 = 0``: the QP plans it directly, and its
+smoothing and rate rows act on its increments.
+
 The per-axis problems are independent (a diagonal model); the active ones are stacked into one
 QP and solved by DAQP, a dense active-set solver, called directly (``contact_solver: daqp``, the
 fastest measured on this QP: docs/controllers.md), or by any other solver through
@@ -80,6 +84,7 @@ from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.backoff import ReversalBackoff
+from peg_ctrl.controllers.prediction import INTEGRATOR, increments, prediction
 from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
 from peg_ctrl.sim.sensing import WrenchPredictor, WristSensor, lowpass_alpha
 from peg_ctrl.sim.state import ControlState
@@ -128,15 +133,18 @@ class ContactQP:
     def __init__(self, settings: ContactSettings) -> None:
         self.s = settings
         n = settings.horizon
-        diff = np.eye(n) - np.eye(n, k=-1)  # dy from y
-        self._block = 2.0 * (np.eye(n) + settings.smoothing * diff.T @ diff)  # Hessian in y
+        # y is an integrator's trajectory from y_0 = 0 (controllers/prediction.py): dy = diff y,
+        # and k steps of at most `step` each reach k `step` at most.
+        _, gamma = prediction(*INTEGRATOR, n)
+        self._diff = increments(*INTEGRATOR, n)
+        self._reach = gamma @ np.ones(n)
+        self._block = 2.0 * (np.eye(n) + settings.smoothing * self._diff.T @ self._diff)  # Hessian in y
         self._cache: dict[int, tuple[_Vec, _Vec]] = {}
 
     def _matrices(self, count: int) -> tuple[_Vec, _Vec]:
         if count not in self._cache:
             hess = scipy.linalg.block_diag(*([self._block] * count))
-            diff = np.eye(self.s.horizon) - np.eye(self.s.horizon, k=-1)
-            rows = scipy.linalg.block_diag(*([diff] * count))  # the rate rows act on y's increments
+            rows = scipy.linalg.block_diag(*([self._diff] * count))  # the rate rows act on y's increments
             self._cache[count] = (hess, rows)
         return self._cache[count]
 
@@ -171,7 +179,7 @@ class ContactQP:
             lin.append(np.full(n, -2.0 * error))
             cap.append(np.full(n, step))
             if i < 3:  # the budget on the predicted force, relaxed to what the rate can reach
-                reach = step * np.arange(1, n + 1)
+                reach = step * self._reach
                 lo.append(np.minimum(measured[i] - s.budget, reach))
                 hi.append(np.maximum(measured[i] + s.budget, -reach))
             else:

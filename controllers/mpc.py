@@ -26,7 +26,8 @@ the velocity box. Moment-controlled axes (``target.moment_axes``): the orientati
 them is dropped and the commanded ``target.torque_world`` (about the pinch point) added outside
 the QP, open loop.
 
-The QP's Hessian and constraint matrix are constant: CasADi's ``conic`` interface is built once
+The prediction and its condensing are :mod:`peg_ctrl.controllers.prediction`'s (shared with the
+contact QP). The QP's Hessian and constraint matrix are constant: CasADi's ``conic`` interface is built once
 and re-solved with new linear terms and bounds, warm-started from the previous solution. Default
 solver qpOASES (``osqp`` selectable). Runs every ``mpc_dt`` (default 10 ms, 100 Hz), zero-order hold between.
 
@@ -73,6 +74,7 @@ from peg_ctrl.controllers.base import (
 )
 from peg_ctrl.controllers.contact_mpc import ContactLoop, ContactSettings
 from peg_ctrl.controllers.dynamics import BaseDynamics
+from peg_ctrl.controllers.prediction import condense
 from peg_ctrl.sim.jaw import JawCalibration
 from peg_ctrl.sim.rotations import rotate, rotate_inv
 from peg_ctrl.sim.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
@@ -227,28 +229,6 @@ def _base_inertia(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     full_m = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, scratch, full_m)
     return np.array([full_m[d, d] for d in dofs]), model.dof_damping[dofs].copy()
-
-
-def condense(
-    a: np.ndarray, b: np.ndarray, q: np.ndarray, p_terminal: np.ndarray, r: np.ndarray, h: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The condensed prediction Z = Phi z0 + Gamma U (Z: stacked z_1..z_N, U: du_0..du_{N-1})
-    over ``h`` steps, and the QP's Hessian and linear map (g = lin @ z0):
-    (Phi, Gamma, Hessian, lin)."""
-    nx, nu = b.shape
-    phi = np.zeros((h * nx, nx))
-    gamma = np.zeros((h * nx, h * nu))
-    power = np.eye(nx)
-    for k in range(h):
-        power = a @ power
-        phi[k * nx : (k + 1) * nx] = power
-        for j in range(k + 1):
-            gamma[k * nx : (k + 1) * nx, j * nu : (j + 1) * nu] = np.linalg.matrix_power(a, k - j) @ b
-    q_bar = scipy.linalg.block_diag(*([q] * (h - 1) + [p_terminal]))
-    r_bar = scipy.linalg.block_diag(*([r] * h))
-    hess = 2.0 * (gamma.T @ q_bar @ gamma + r_bar)
-    hess = 0.5 * (hess + hess.T)
-    return phi, gamma, hess, 2.0 * gamma.T @ q_bar @ phi
 
 
 class MPCController(ControllerBase[MPCConfig]):

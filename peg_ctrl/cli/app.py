@@ -2,8 +2,9 @@
 
 Exit codes, decided in one place (:func:`main`):
 
-- 0: done (an episode: inserted);
-- 1: an episode ran but failed (timeout, force spike, ...);
+- 0: done (an episode or a teleop session: inserted);
+- 1: an episode ran but failed (timeout, force spike, ...), or a teleop session ended without the
+  peg inserted;
 - 2: the user's or the system's problem: a bad argument or config (every class in
   :data:`peg_ctrl.errors.USER_ERRORS`, and any other :class:`~peg_ctrl.errors.PegCtrlError` that
   is not a simulation error, such as no window system for teleop), or an :class:`OSError` (a

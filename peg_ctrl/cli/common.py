@@ -1,7 +1,7 @@
 """What every ``peg-sim`` command shares: exit codes, the one-line-error parser, the registries'
 names for option choices, the shared options (``--out``, ``--config``, ``--set``,
 ``--controller``, ``--profile``) and the episode-config plumbing of ``run``, ``model`` and
-``teleop``."""
+``teleop`` (the config file, then ``--set``, then ``--controller``: :func:`episode_mapping`)."""
 
 from __future__ import annotations
 
@@ -108,23 +108,56 @@ def add_known(p: argparse.ArgumentParser, flag: str, known: Known, help: str, **
 
 
 def episode_mapping(args: argparse.Namespace) -> dict[str, Any]:
-    """The episode config's plain data: ``--config`` file, then every ``--set KEY=VALUE``."""
+    """The episode config's plain data: the ``--config`` file, every ``--set KEY=VALUE``, then
+    ``--controller`` (the controller section merged by :func:`merge_controller`). ``args`` may
+    lack ``config`` or ``controller`` (a command without the option)."""
     from peg_ctrl.config import apply_overrides, read_mapping
 
-    data = read_mapping(Path(args.config)) if args.config else {}
-    return apply_overrides(data, args.set or [])
+    config = getattr(args, "config", None)
+    data = read_mapping(Path(config)) if config else {}
+    sets = args.set or []
+    merged = apply_overrides(data, sets)
+    controller_sets = [item for item in sets if item.partition("=")[0].strip().split(".")[0] == "controller"]
+    section = merge_controller(data.get("controller"), controller_sets, getattr(args, "controller", None))
+    if section is not None:
+        merged["controller"] = section
+    return merged
 
 
-def set_controller(data: dict[str, Any], name: str | None) -> None:
-    """Apply a ``--controller NAME`` flag to episode config data: it keeps the controller fields
-    of the file and ``--set`` when they are for the same controller, else replaces them."""
-    if name is None:
-        return
-    ctrl = data.get("controller")
-    if isinstance(ctrl, dict) and ctrl.get("name", name) == name:
-        data["controller"] = {**ctrl, "name": name}
-    else:
-        data["controller"] = {"name": name}
+def merge_controller(file: object, sets: list[str], flag: str | None) -> dict[str, Any] | None:
+    """The episode's controller section from the config file's (``file``: a name, a mapping or
+    None), the ``--set controller...`` assignments (``sets``) and ``--controller`` (``flag``).
+
+    The controller is the flag's, else the last ``--set controller.name``'s (or ``--set
+    controller=NAME``'s), else the file's. The file's fields are kept when they are that
+    controller's (the same name, or none) and dropped when the file names another controller;
+    the ``--set controller.*`` fields are always kept, on top of them (an unknown field is then
+    refused by name). A flag and a ``--set controller.name`` that name different controllers
+    are refused in one line. None: nothing on the command line touches the controller.
+    """
+    from peg_ctrl.config import apply_overrides
+
+    if not sets and flag is None:
+        return None
+    set_section = apply_overrides({}, sets).get("controller")
+    set_name = set_section if isinstance(set_section, str) else None
+    if isinstance(set_section, dict):
+        set_name = set_section.get("name")
+    if flag is not None and set_name is not None and set_name != flag:
+        raise ConfigError(
+            f"--controller {flag} and --set controller.name={set_name} name different controllers; "
+            "give one of them"
+        )
+    base = {"name": file} if isinstance(file, str) else dict(file) if isinstance(file, dict) else {}
+    name = flag or set_name or base.get("name")
+    if name is not None and base.get("name", name) != name:
+        base = {}  # the file's fields are another controller's
+    section = apply_overrides({"controller": base}, sets)["controller"]
+    if isinstance(section, str):
+        section = {"name": section}
+    if not isinstance(section, dict):
+        return None  # not a controller section at all: loading refuses it by name
+    return section if name is None else {**section, "name": name}
 
 
 def require_display(what: str, instead: str) -> None:

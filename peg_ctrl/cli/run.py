@@ -16,7 +16,6 @@ from peg_ctrl.cli.common import (
     add_set,
     episode_mapping,
     require_display,
-    set_controller,
 )
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.io import lock_output_dir, prepare_output_dir
@@ -34,7 +33,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "DIR/summary.json, DIR/log.jsonl, DIR/forces.npz, DIR/force_profile.png (and DIR/episode.mp4). "
         "Exit code 0 on success, 1 on a failed episode, 2 on bad input.",
     )
-    add_known(p, "--controller", CONTROLLERS, "controller: %(choices)s (default pd, or the config file's)")
+    add_known(
+        p,
+        "--controller",
+        CONTROLLERS,
+        "controller: %(choices)s (default pd, or --set controller.name's, or the config file's; the "
+        "file's controller fields are kept only for its own controller, --set controller.* always)",
+    )
     add_known(p, "--planner", PLANNERS, "planner: %(choices)s (default ruckig, or the config file's)")
     p.add_argument(
         "--seed",
@@ -74,11 +79,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _config(args: argparse.Namespace) -> EpisodeConfig:
-    """The episode config: the file, ``--set``, then the named flags, which override both."""
+    """The episode config: the file, ``--set``, then the named flags, which override both
+    (``--controller`` as :func:`~peg_ctrl.cli.common.merge_controller` says)."""
     from peg_ctrl.run.episode import episode_config_from_mapping
 
     data = episode_mapping(args)
-    set_controller(data, args.controller)
     if args.planner is not None:
         data["planner"] = args.planner
     if args.seed is not None:

@@ -6,7 +6,15 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from peg_ctrl.cli.common import CONTROLLERS, add_known, add_out, add_set, require_display, set_controller
+from peg_ctrl.cli.common import (
+    CONTROLLERS,
+    EXIT_FAILED,
+    add_known,
+    add_out,
+    add_set,
+    episode_mapping,
+    require_display,
+)
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.io import lock_output_dir, prepare_output_dir
 
@@ -29,7 +37,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "Left/Right yaw, [ / ] jaw open/close, Shift fine motion, J/K/L speed 0.5x/1x/2x, -/= speed "
         "down/up, Z reset, Esc quit. Mouse: left-drag rotate, right-drag move, scroll zoom. "
         "--set takes the controller, physics profile and scene fields of 'peg-sim run' (default: seed "
-        "physics); DIR/config.json and the summary record what the session ran.",
+        "physics); DIR/config.json and the summary record what the session ran. Exit code 0 when "
+        "the session ends with the peg inserted, 1 when it ends without, 2 on bad input.",
     )
     add_known(
         p, "--controller", CONTROLLERS, "controller: %(choices)s (default pd, or --set controller.name's)"
@@ -54,7 +63,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Check the arguments, run the session and print how it ended."""
+    """Check the arguments, run the session and print how it ended; exit code 0 when it ended
+    with the peg inserted, 1 when not (as ``run`` for a failed episode)."""
     from peg_ctrl.teleop import SPEED_RANGE
 
     lo, hi = SPEED_RANGE
@@ -74,16 +84,15 @@ def run(args: argparse.Namespace) -> int:
         f"teleop ended ({summary['end']}): {inserted}, {summary['total_timesteps']} steps, "
         f"{summary['attempts']} attempt(s); wrote {out / 'summary.json'}"
     )
-    return 0
+    return 0 if summary["status"] == "success" else EXIT_FAILED
 
 
 def _config(args: argparse.Namespace) -> EpisodeConfig:
     """A teleop session's simulation as an episode config (``--set``, then ``--controller``,
     ``--seed``, ``--randomize``), checked as ``run`` checks one, before anything is written."""
-    from peg_ctrl.config import apply_overrides
     from peg_ctrl.run.episode import episode_config_from_mapping
 
-    data = apply_overrides({}, args.set or [])
+    data = episode_mapping(args)
     allowed = ", ".join(f"{name}.*" for name in _TELEOP_SET_FIELDS)
     for item in args.set or []:
         key = item.partition("=")[0].strip()
@@ -92,7 +101,6 @@ def _config(args: argparse.Namespace) -> EpisodeConfig:
                 f"--set {key}: not a teleop setting; teleop takes {allowed} "
                 "(the start pose: --seed and --randomize)"
             )
-    set_controller(data, args.controller)
     data["seed"] = args.seed if args.seed is not None else 0
     data["randomization"] = {"enabled": args.randomize}
     return episode_config_from_mapping(data)  # refuses a control period the timestep does not divide

@@ -6,7 +6,9 @@
   narrow to hold it);
 - the grasp, on its own scale: the grip (the finger pads' squeeze on the peg) and the net
   gripper-peg contact force, the load the grasp carries (a fraction of a newton while the peg is
-  carried, next to tens of newtons in the hole);
+  carried, next to tens of newtons in the hole). Both axes run from zero to 1.4 times their
+  highest value, so that a grip held at one value throughout (a held insertion) is a line below
+  the legend, not one hidden on the axis's top edge;
 - the insertion: the peg-block contact force;
 - every other contact pair that carried a force (the peg on the table, the fingers on the block
   or the table), if any did;
@@ -23,7 +25,7 @@ import numpy as np
 
 from peg_ctrl.io import atomic_path
 
-__all__ = ["plot_force_profile", "PHASE_COLOURS", "pyplot", "save_figure"]
+__all__ = ["force_profile_figure", "plot_force_profile", "PHASE_COLOURS", "pyplot", "save_figure"]
 
 #: Phase name -> colour of its span (the strip at the top; the panels shade it lighter).
 PHASE_COLOURS = {
@@ -43,6 +45,8 @@ PHASE_COLOURS = {
 }
 _UNKNOWN_PHASE = "#e0e0e0"
 _GRIP, _INSERT = "gripper-peg", "block-peg"
+#: The grasp panel's axes reach this factor times their highest value (room for the legend).
+GRASP_HEADROOM = 1.4
 
 
 def pyplot() -> Any:
@@ -68,7 +72,7 @@ def save_figure(fig: Any, path: str | Path, **savefig: Any) -> Path:
 
 
 def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: Path) -> Path:
-    """Draw an episode's force profile as a PNG and return its path.
+    """Draw an episode's force profile (:func:`force_profile_figure`) as a PNG and return its path.
 
     Args:
         trace_npz: the episode's ``forces.npz`` (columns
@@ -77,6 +81,15 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
             phase was still running at the end), as in ``summary.json``.
         out: the PNG to write (its directory is created).
     """
+    fig = force_profile_figure(trace_npz, phases)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return save_figure(fig, out)
+
+
+def force_profile_figure(trace_npz: Path, phases: Sequence[dict[str, Any]]) -> Any:
+    """The force profile's matplotlib ``Figure`` (arguments as for :func:`plot_force_profile`),
+    open: the caller saves or closes it."""
     trace = _Trace(trace_npz)
     spans = _phase_spans(phases, trace.t_last)
     others = [
@@ -108,15 +121,12 @@ def plot_force_profile(trace_npz: Path, phases: Sequence[dict[str, Any]], out: P
         ax.margins(x=0)
         for name, start, end in spans:
             ax.axvspan(start, end, color=PHASE_COLOURS.get(name, _UNKNOWN_PHASE), alpha=0.3, lw=0, zorder=0)
-    for ax in (panel_axes["grip"], panel_axes["insert"]):
-        ax.set_ylim(bottom=0.0)
+    panel_axes["insert"].set_ylim(bottom=0.0)
     axes[-1].set_xlabel("time [s]")
     axes[-1].set_xlim(0.0, trace.t_last)
     _phase_strip(fig, strip, spans)
     fig.suptitle("Contact forces by phase", fontsize=11)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return save_figure(fig, out)
+    return fig
 
 
 class _Trace:
@@ -160,11 +170,23 @@ def _grip_panel(grip_ax: Any, trace: _Trace) -> None:
     trace.draw(load_ax, _GRIP, "net gripper-peg force: the load carried (right axis)", "C2")
     grip_ax.set_ylabel("grip [N]", color="C1")
     load_ax.set_ylabel("load [N]", color="C2")
-    load_ax.set_ylim(bottom=0.0)
+    _from_zero(grip_ax, trace.column("grip_force_n"))
+    _from_zero(load_ax, trace.column(_GRIP))
     grip_ax.set_title("grasp", fontsize=8, loc="left")
     handles = grip_ax.get_lines() + load_ax.get_lines()
     if handles:
         grip_ax.legend(handles, [h.get_label() for h in handles], loc="upper left", fontsize=7, ncol=2)
+
+
+def _from_zero(ax: Any, values: np.ndarray | None) -> None:
+    """The y axis from zero to :data:`GRASP_HEADROOM` times the highest of ``values``
+    (autoscaling would put a constant line on the top edge), or from zero as autoscaled when
+    there is no positive value."""
+    top = float(np.max(values)) if values is not None and len(values) else 0.0
+    if np.isfinite(top) and top > 0.0:
+        ax.set_ylim(0.0, GRASP_HEADROOM * top)
+    else:
+        ax.set_ylim(bottom=0.0)
 
 
 def _insert_panel(ax: Any, trace: _Trace) -> None:

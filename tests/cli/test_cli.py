@@ -578,6 +578,43 @@ def test_calibrate_replace_packaged_is_refused_in_an_installed_copy(
     assert _packaged_calibration() == before
 
 
+@pytest.mark.parametrize("window", [False, True], ids=["scripted", "window"])
+def test_teleop_ended_without_the_peg_inserted_exits_1(
+    window: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As ``run`` does for a failed episode: a session (scripted, or in the window, here cut to
+    0.1 s) that ends with the peg not inserted exits with 1, its records written."""
+    import peg_ctrl.cli.teleop_window
+    from peg_ctrl.teleop import ScriptedOperator
+
+    if window:
+        monkeypatch.setenv("DISPLAY", ":0")
+
+        def quit_early(session, screenshot):  # type: ignore[no-untyped-def]
+            session.advance(0.1)
+            return session.finish("quit")
+
+        monkeypatch.setattr(peg_ctrl.cli.teleop_window, "run_window", quit_early)
+    else:
+        monkeypatch.setattr(ScriptedOperator, "run", lambda self, **kwargs: self.session.advance(0.1))
+    argv = ["teleop", *([] if window else ["--scripted"]), "--out", str(tmp_path)]
+    assert main(argv) == 1
+    assert "not inserted" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert (summary["status"], summary["end"]) == ("failure", "quit" if window else "script_done")
+
+
+@pytest.mark.parametrize(("status", "code"), [("success", 0), ("failure", 1)])
+def test_teleop_exit_code_follows_the_sessions_status(
+    status: str, code: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import peg_ctrl.cli.teleop
+
+    summary = {"status": status, "end": "script_done", "total_timesteps": 10, "attempts": 1}
+    monkeypatch.setattr(peg_ctrl.cli.teleop, "_session", lambda args, cfg, out: summary)
+    assert main(["teleop", "--scripted", "--out", str(tmp_path)]) == code
+
+
 def test_teleop_interrupted_keeps_its_records(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from peg_ctrl.run.episode_log import read_trace
     from peg_ctrl.teleop import ScriptedOperator

@@ -221,3 +221,85 @@ def test_bad_run_and_sweep_overrides_are_one_line_with_exit_2(
 ) -> None:
     assert_one_line_error(peg_sim_here(argv, cwd=tmp_path), message)
     assert not (tmp_path / "X").exists()
+
+
+# --- --controller beside --set controller.* and a config file ----------------------------------
+
+MPC_FILE = "controller: {name: mpc, formulation: contact, force_limit: 7.0}\n"
+
+
+def _run_controller(argv: list[str], cwd: Path) -> dict[str, Any]:
+    """The controller section ``peg-sim run ARGV`` would run (parsed, merged and loaded as ``run``
+    does, nothing run); a file named in ARGV is in ``cwd``."""
+    from peg_ctrl.cli.app import _parser
+    from peg_ctrl.cli.run import _config
+    from peg_ctrl.config import to_dict
+
+    argv = [str(cwd / a) if a.endswith(".yaml") else a for a in argv]
+    return to_dict(_config(_parser().parse_args(["run", *argv])).controller)
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        # the flag and --set on the same controller: both kept, in either order
+        (["--controller", "pd", "--set", "controller.kp_pos=2000"], {"name": "pd", "kp_pos": 2000.0}),
+        (["--set", "controller.kp_pos=2000", "--controller", "pd"], {"name": "pd", "kp_pos": 2000.0}),
+        (
+            [
+                "--controller",
+                "impedance",
+                "--set",
+                "controller.name=impedance",
+                "--set",
+                "controller.control_dt=0.01",
+            ],
+            {"name": "impedance", "control_dt": 0.01},
+        ),
+        # a file's fields are kept for its controller, --set on top of them
+        (["--config", "mpc.yaml", "--set", "controller.force_limit=5"], {"name": "mpc", "force_limit": 5.0}),
+        (["--config", "mpc.yaml", "--controller", "mpc"], {"name": "mpc", "force_limit": 7.0}),
+        # ... and dropped when the command line names another controller, whose --set fields stay
+        (
+            ["--config", "mpc.yaml", "--controller", "pd", "--set", "controller.kp_pos=2000"],
+            {"name": "pd", "kp_pos": 2000.0},
+        ),
+        (
+            ["--config", "mpc.yaml", "--set", "controller.kp_pos=2000", "--controller", "pd"],
+            {"name": "pd", "kp_pos": 2000.0},
+        ),
+        (
+            ["--config", "mpc.yaml", "--set", "controller.name=pd", "--set", "controller.kp_pos=2000"],
+            {"name": "pd", "kp_pos": 2000.0},
+        ),
+    ],
+)
+def test_controller_flag_set_and_file_merge(
+    argv: list[str], expected: dict[str, Any], tmp_path: Path
+) -> None:
+    (tmp_path / "mpc.yaml").write_text(MPC_FILE)
+    controller = _run_controller(argv, tmp_path)
+    assert {k: controller[k] for k in expected} == expected
+    if controller["name"] == "mpc":
+        assert controller["formulation"] == "contact"  # the file's other field
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        ["--controller", "pd", "--set", "controller.name=impedance"],
+        ["--set", "controller.name=impedance", "--controller", "pd"],
+        ["--config", "mpc.yaml", "--controller", "pd", "--set", "controller.name=impedance"],
+        ["--config", "mpc.yaml", "--set", "controller=impedance", "--controller", "pd"],
+    ],
+)
+def test_a_flag_and_a_set_naming_different_controllers_are_refused(
+    options: list[str], tmp_path: Path
+) -> None:
+    (tmp_path / "mpc.yaml").write_text(MPC_FILE)
+    proc = peg_sim_here(["run", *options, "--out", "X"], cwd=tmp_path)
+    assert_one_line_error(
+        proc,
+        "--controller pd and --set controller.name=impedance name different controllers; give one of them",
+    )
+    assert not (tmp_path / "X").exists()

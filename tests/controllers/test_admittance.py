@@ -13,6 +13,7 @@ from peg_ctrl.commands import GripperTarget, euler_to_quat
 from peg_ctrl.controllers.admittance import AdmittanceConfig, AdmittanceController
 from peg_ctrl.controllers.pd import PDConfig, PDController
 from peg_ctrl.run.tracker import Tracker
+from peg_ctrl.sim.sensing import WristSensor
 from peg_ctrl.sim.state import ControlState
 
 from ..conftest import HOME, target
@@ -195,3 +196,36 @@ def test_a_moment_axis_turns_slower_after_its_moment_reverses(
     rate = turn_rate((-0.01, 0.01), 1500)
     np.testing.assert_allclose(np.abs(rate[:2]), [0.005, 0.01], rtol=0.01)
     np.testing.assert_array_equal(c.loop.backoff.scale, [2.0, 1.0, 1.0])
+
+
+def test_the_tare_is_the_wrist_sensors(model: mujoco.MjModel, home_state: ControlState) -> None:
+    """One tare: the admittance's is a :class:`WristSensor`'s, bit for bit the same as a sensor of
+    the same settings fed the same readings, and it removes a bias the model does not know."""
+    cfg = AdmittanceConfig(compliance_center=(0.0, 0.0, -0.07), tare_time=0.05)
+    c = AdmittanceController(model, cfg)
+    bias = np.array([0.4, -0.3, 0.2, 0.01, -0.02, 0.005])  # sensor frame [N, N m]
+    rest = home_state._replace(ft_wrench=_at_rest_wrench(c, home_state, np.zeros(3)) + bias)
+    sensor = WristSensor(
+        model,
+        centre_body=np.array(cfg.compliance_center),
+        dt=cfg.control_dt,
+        force_hz=cfg.filter_hz,
+        moment_hz=cfg.moment_filter_hz,
+        tare_time=cfg.tare_time,
+        fast_moment=True,
+    )
+    c.reset(rest)
+    sensor.reset(rest)
+    hold = target(rest.p_world)
+    rng = np.random.default_rng(0)
+    for i in range(60):  # 50 readings in the tare, 10 after it; a little noise for the estimate
+        state = rest._replace(t=0.001 * i, ft_wrench=rest.ft_wrench + rng.normal(0.0, 0.01, 6))
+        c.compute(state, hold)
+        sensor.update(state, accel_ref=np.zeros(3))
+    assert np.all(c.loop.sensor.noise_force > 0.0)  # the tare ran
+    for name in ("force_bias", "moment_bias_body", "noise_force", "noise_moment", "force", "moment_fast"):
+        np.testing.assert_array_equal(getattr(c.loop.sensor, name), getattr(sensor, name), err_msg=name)
+    assert not [name for name in vars(c.loop) if "tare" in name or "bias" in name]  # none of its own
+    push = np.array([2.0, 0.0, -3.0])
+    pushed = rest._replace(t=0.06, ft_wrench=_at_rest_wrench(c, rest, push) + bias)
+    np.testing.assert_allclose(c.external_force(pushed, np.zeros(3)), push, atol=0.02)

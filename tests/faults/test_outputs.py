@@ -491,7 +491,7 @@ def test_a_teleop_session_ended_early_writes_strict_json(
     from peg_ctrl.teleop import ScriptedOperator
 
     monkeypatch.setattr(ScriptedOperator, "run", lambda self, **kwargs: self.session.advance(0.2))
-    assert main(["teleop", "--scripted", "--out", str(tmp_path)]) == 0
+    assert main(["teleop", "--scripted", "--out", str(tmp_path)]) == 1  # not inserted
     summary = strict_json((tmp_path / "summary.json").read_text())
     assert (summary["status"], summary["end"], summary["end_state"]) == (
         "failure",

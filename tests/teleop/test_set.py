@@ -43,7 +43,8 @@ def test_scripted_teleop_runs_in_the_precision_profile(
 def test_the_precision_profile_reaches_the_session(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(ScriptedOperator, "run", lambda self, **kwargs: self.session.advance(0.1))
     out = tmp_path / "session"
-    assert main(["teleop", "--scripted", "--set", "physics.profile=precision", "--out", str(out)]) == 0
+    # 0.1 s of the script: the peg is not inserted, exit code 1
+    assert main(["teleop", "--scripted", "--set", "physics.profile=precision", "--out", str(out)]) == 1
     config, summary, start = _written(out)
     assert config["physics"] == {"profile": "precision"}
     assert summary["physics"] == start["physics"] == "precision"
@@ -62,7 +63,7 @@ def test_controller_and_scene_settings_reach_the_session(
     out = tmp_path / "session"
     argv = ["teleop", "--scripted", "--controller", "pd", "--out", str(out)]
     argv += ["--set", "scene.assets.clearance=0.0005", "--set", "controller.kp_pos=2000"]
-    assert main(argv) == 0
+    assert main(argv) == 1  # 0.1 s of the script: not inserted
     config, summary, start = _written(out)
     assert config["scene"]["assets"]["clearance"] == 0.0005
     assert (config["controller"]["name"], config["controller"]["kp_pos"]) == ("pd", 2000.0)
@@ -91,6 +92,10 @@ def test_controller_and_scene_settings_reach_the_session(
         (
             ["--controller", "admittance", "--set", "physics.profile=fast"],
             "control_dt 0.001 s is not a whole multiple of the physics timestep 0.0025 s",
+        ),
+        (
+            ["--set", "controller.name=impedance", "--controller", "pd"],
+            "--controller pd and --set controller.name=impedance name different controllers",
         ),
     ],
 )
