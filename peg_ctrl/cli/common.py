@@ -96,7 +96,8 @@ def add_set(p: argparse.ArgumentParser, what: str = "config", help: str = "") ->
         action="append",
         metavar="KEY=VALUE",
         help=help
-        or f"set a {what} field by dotted path, value parsed as YAML (repeatable), "
+        or f"set {'an' if what[0] in 'aeiou' else 'a'} {what} field by dotted path, value parsed as YAML "
+        "(repeatable), "
         "e.g. --set physics.profile=precision --set scene.assets.clearance=5e-5",
     )
 
