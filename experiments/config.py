@@ -327,7 +327,7 @@ def _episode(
     if strategy is not None:
         keeps_own = strategy_name(task) == strategy.name and strategy == type(strategy)()
         if not keeps_own:
-            task = dataclasses.replace(task, strategy=strategy)  # type: ignore[call-arg]
+            task = task.with_strategy(strategy)
     scene = dataclasses.replace(exp.scene, assets=dataclasses.replace(exp.scene.assets, clearance=clearance))
     return EpisodeConfig(
         controller=spec,

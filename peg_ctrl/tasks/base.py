@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
-from peg_ctrl.errors import UnknownComponent
+from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.state import ControlState, PegObservation
 from peg_ctrl.tasks.monitors import InsertionMonitor, SeatedHold
@@ -264,6 +264,16 @@ class TaskSpec:
         """The name of the insertion strategy the task runs (``task.strategy``); "" for a task
         without strategies (the default)."""
         return ""
+
+    def with_strategy(self, strategy: Any) -> TaskSpec:
+        """This config running ``strategy`` (a strategy config) instead of its own.
+
+        Raises:
+            ConfigError: for a task without strategies (the default).
+        """
+        raise ConfigError(
+            f"task {self.name!r} has no strategy to replace; use task: {{name: held_insertion}}"
+        )
 
     def build(self, context: TaskContext) -> Task:
         """The task this config describes."""

@@ -115,6 +115,9 @@ class HeldInsertionConfig(TaskSpec):
     def strategy_name(self) -> str:
         return self.strategy.name
 
+    def with_strategy(self, strategy: StrategyConfig) -> HeldInsertionConfig:
+        return dataclasses.replace(self, strategy=strategy)
+
     def build(self, context: TaskContext) -> HeldInsertionTask:
         return HeldInsertionTask(
             scene=context.scene,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Any, ClassVar
 
 import mujoco
@@ -148,3 +149,18 @@ def test_strategy_name_is_declared_by_the_task_config() -> None:
     held = episode_config_from_mapping({"task": {"name": "held_insertion", "strategy": "tilt"}})
     assert held.task.strategy_name == "tilt"
     assert episode_config_from_mapping({}).task.strategy_name == ""
+
+
+def test_a_task_config_replaces_its_strategy_or_says_it_has_none() -> None:
+    from peg_ctrl.errors import ConfigError
+    from peg_ctrl.tasks.held_insertion import HeldInsertionConfig
+    from peg_ctrl.tasks.pick_and_place import TaskConfig as PickAndPlaceConfig
+    from peg_ctrl.tasks.strategies import STRATEGIES
+
+    spiral = STRATEGIES["spiral"]()
+    held = HeldInsertionConfig().with_strategy(spiral)
+    assert held.strategy == spiral and held.strategy_name == "spiral"
+    assert dataclasses.replace(held, strategy=HeldInsertionConfig().strategy) == HeldInsertionConfig()
+    message = "task 'pick_and_place' has no strategy to replace; use task: {name: held_insertion}"
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        PickAndPlaceConfig().with_strategy(spiral)
