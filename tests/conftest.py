@@ -77,9 +77,12 @@ def sigint_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def peg_sim(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
-    """``peg-sim ARGV`` in a fresh interpreter, run in ``cwd``."""
-    return subprocess.run([sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd)
+def peg_sim(argv: list[str], *, cwd: Path, timeout: float = 600.0) -> subprocess.CompletedProcess[str]:
+    """``peg-sim ARGV`` in a fresh interpreter, run in ``cwd``; a command that runs longer than
+    ``timeout`` [s] fails the test (subprocess.TimeoutExpired) instead of hanging the suite."""
+    return subprocess.run(
+        [sys.executable, "-m", "peg_ctrl", *argv], capture_output=True, text=True, cwd=cwd, timeout=timeout
+    )
 
 
 def peg_sim_here(argv: list[str], *, cwd: Path) -> subprocess.CompletedProcess[str]:
