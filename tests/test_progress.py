@@ -23,6 +23,15 @@ class _Terminal(io.StringIO):
         return True
 
 
+def _environment(monkeypatch: pytest.MonkeyPatch, setting: str | None, tty: bool) -> None:
+    """The progress variable (ENV_VAR) set to ``setting`` (None: unset); stderr a terminal or not."""
+    if setting is None:
+        monkeypatch.delenv(ENV_VAR, raising=False)
+    else:
+        monkeypatch.setenv(ENV_VAR, setting)
+    monkeypatch.setattr(sys, "stderr", _Terminal() if tty else io.StringIO())
+
+
 @pytest.mark.parametrize(
     "setting, tty, requested, shown",
     [
@@ -38,11 +47,7 @@ class _Terminal(io.StringIO):
 def test_bars_show_on_a_terminal_unless_switched_off(
     setting: str | None, tty: bool, requested: bool, shown: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    if setting is None:
-        monkeypatch.delenv(ENV_VAR, raising=False)
-    else:
-        monkeypatch.setenv(ENV_VAR, setting)
-    monkeypatch.setattr(sys, "stderr", _Terminal() if tty else io.StringIO())
+    _environment(monkeypatch, setting, tty)
     assert show_progress(requested) is shown
 
 
@@ -196,11 +201,7 @@ def test_durations(seconds: float, text: str) -> None:
 def test_lines_replace_the_bar_when_stderr_is_not_a_terminal(
     setting: str | None, tty: bool, lines: bool, mode: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    if setting is None:
-        monkeypatch.delenv(ENV_VAR, raising=False)
-    else:
-        monkeypatch.setenv(ENV_VAR, setting)
-    monkeypatch.setattr(sys, "stderr", _Terminal() if tty else io.StringIO())
+    _environment(monkeypatch, setting, tty)
     assert progress_mode(lines=lines) == mode
     assert progress_mode(False, lines=lines) == "off"
 

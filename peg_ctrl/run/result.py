@@ -77,6 +77,7 @@ class Metric:
     column: bool = True  # a column of episodes.csv (a scalar field only)
     job: bool = False  # a column the sweep writes from the experiment's job (the arm's label, ...)
     wall_clock: bool = False  # measured in wall time: it differs between two runs of one episode
+    cost: bool = False  # what the control costs (the report's control-cost section)
     summary: Summary | None = None  # how a sweep summarises it; None: it does not
 
 
@@ -86,11 +87,14 @@ def metric(
     column: bool = True,
     job: bool = False,
     wall_clock: bool = False,
+    cost: bool = False,
     summary: Summary | None = None,
 ) -> dict[str, Metric]:
     """The metadata of a dataclass field that declares a :class:`Metric`:
     ``field(metadata=metric(unit="N", summary=Summary(...)))``."""
-    return {"metric": Metric(unit=unit, column=column, job=job, wall_clock=wall_clock, summary=summary)}
+    return {
+        "metric": Metric(unit=unit, column=column, job=job, wall_clock=wall_clock, cost=cost, summary=summary)
+    }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,7 +175,7 @@ def summarised(result: type | None = None) -> list[MetricField]:
 # The metadata of the fields that repeat in the record.
 _JOB = metric(job=True)  # a column the sweep writes from the experiment's job
 _NO_COLUMN = metric(column=False)
-_WALL_S = metric(unit="s", wall_clock=True)
+_COST_S = metric(unit="s", wall_clock=True, cost=True)
 
 
 @dataclasses.dataclass
@@ -229,7 +233,7 @@ class EpisodeResult:
     physics: str  # the physics profile
     total_timesteps: int
     sim_time_s: float = field(metadata=metric(unit="s"))
-    wall_time_s: float = field(metadata=_WALL_S)
+    wall_time_s: float = field(metadata=metric(unit="s", wall_clock=True))
     detail: str = field(metadata=_NO_COLUMN)
     log_path: str = field(metadata=_JOB)  # in episodes.csv: relative to the sweep's directory
     trace_path: str = field(metadata=_NO_COLUMN)
@@ -241,12 +245,12 @@ class EpisodeResult:
     # real-time factor (mean solve time over its period). The solve_time_* fields repeat the
     # first optimiser's (the MPC's effort QP, the sampling MPC's planner, the IK's QP); None
     # for a controller without one.
-    control_time_p50_s: float | None = field(default=None, metadata=_WALL_S)
-    control_time_p99_s: float | None = field(default=None, metadata=_WALL_S)
-    solve_time_p50_s: float | None = field(default=None, metadata=_WALL_S)
-    solve_time_p99_s: float | None = field(default=None, metadata=_WALL_S)
-    solve_period_s: float | None = field(default=None, metadata=metric(unit="s"))
-    solve_real_time_factor: float | None = field(default=None, metadata=metric(wall_clock=True))
+    control_time_p50_s: float | None = field(default=None, metadata=_COST_S)
+    control_time_p99_s: float | None = field(default=None, metadata=_COST_S)
+    solve_time_p50_s: float | None = field(default=None, metadata=_COST_S)
+    solve_time_p99_s: float | None = field(default=None, metadata=_COST_S)
+    solve_period_s: float | None = field(default=None, metadata=metric(unit="s", cost=True))
+    solve_real_time_factor: float | None = field(default=None, metadata=metric(wall_clock=True, cost=True))
     solver_timing: dict[str, dict[str, float]] = field(default_factory=dict, metadata=metric(wall_clock=True))
     phantom_contacts: int = 0  # physics steps whose collider returned a phantom (loop.PhantomGuard)
 
@@ -273,14 +277,7 @@ class EpisodeResult:
         )
 
 
-# The summary's fields of what the control costs (see EpisodeResult; columns of a sweep's table).
-COST_FIELDS = (
-    "control_time_p50_s",
-    "control_time_p99_s",
-    "solve_time_p50_s",
-    "solve_time_p99_s",
-    "solve_period_s",
-    "solve_real_time_factor",
-)
+#: The summary's fields of what the control costs (the report's control-cost section), in order.
+COST_FIELDS = tuple(f.name for f in metric_fields(EpisodeResult) if f.metric.cost)
 #: Summary fields measured in wall time: they differ between two runs of the same episode.
 WALL_CLOCK_FIELDS = tuple(f.name for f in metric_fields(EpisodeResult) if f.metric.wall_clock)
