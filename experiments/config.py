@@ -38,7 +38,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from peg_ctrl.config import ConfigError, apply_overrides, load, read_mapping, to_dict
+from peg_ctrl.config import ConfigError, apply_overrides, is_selectable, load, read_mapping, to_dict
 from peg_ctrl.controllers.base import ControllerConfig
 from peg_ctrl.planners import PLANNERS
 from peg_ctrl.run.episode import (
@@ -400,9 +400,35 @@ def expand(exp: ExperimentConfig) -> list[Job]:
 
 
 def episode_key(cfg: EpisodeConfig) -> str:
-    """An episode's identity: 16 hex digits of the SHA-256 of its config as JSON."""
-    blob = json.dumps(to_dict(cfg), sort_keys=True).encode()
+    """An episode's identity: 16 hex digits of the SHA-256 of its config as JSON, fields at
+    their defaults left out, so that a new field with a default keeps every existing key."""
+    blob = json.dumps(_identity(cfg), sort_keys=True).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _identity(cfg: Any) -> Any:
+    """:func:`to_dict` without the dataclass fields that equal their default (a selectable
+    config keeps its name)."""
+    if not (dataclasses.is_dataclass(cfg) and not isinstance(cfg, type)):
+        return to_dict(cfg)
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cfg):
+        if not f.init:
+            continue
+        value = getattr(cfg, f.name)
+        if f.default is not dataclasses.MISSING:
+            default: Any = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = dataclasses.MISSING
+        if default is dataclasses.MISSING or _json(value) != _json(default):
+            out[f.name] = _identity(value)
+    return {"name": cfg.name, **out} if is_selectable(type(cfg)) else out
+
+
+def _json(value: Any) -> str:
+    return json.dumps(to_dict(value), sort_keys=True)
 
 
 def _apply_cell(base: EpisodeConfig, cell: dict[str, Any]) -> EpisodeConfig:

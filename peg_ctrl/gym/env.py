@@ -92,10 +92,10 @@ Other keyword arguments of ``gymnasium.make``
     ``seed``); ``disturbances`` (a mapping of :class:`~peg_ctrl.run.episode.DomainConfig` fields:
     ``peg_mass_scale``, ``friction_scale``, ``gain_scale`` ranges drawn per episode;
     ``position_noise`` [m] and ``velocity_noise`` [m/s, rad/s] on the sensed state; the wrist
-    F/T sensor as a preset ``ft_sensor`` (``ideal``, ``wrist``, ``forge``) or by its fields
+    F/T sensor as a preset ``ft_sensor`` (``ideal``, ``wrist``, ``mini45``, ``forge``) or by its fields
     ``force_noise`` [N] (the forces only: it used to cover the torques too, which now take
-    ``torque_noise``), ``torque_noise`` [N m], ``ft_latency`` [s] and ``ft_bias_drift``
-    [N/sqrt(s)], see docs/sensing.md); ``scene`` (a
+    ``torque_noise``), ``torque_noise`` [N m], ``ft_latency`` [s], ``ft_bias_drift``
+    [N/sqrt(s)] and ``ft_rate`` [Hz], see docs/sensing.md); ``scene`` (a
     mapping of :class:`~peg_ctrl.sim.scene.SceneConfig` fields, e.g. ``{"assets": {"clearance":
     1e-4, "chamfer": 1e-3}}``); ``config`` (a base episode config: a mapping or a file path, which
     the other arguments override); ``randomize`` (the pick-and-place start pose, default True);

@@ -86,7 +86,7 @@ class DomainConfig:
 
     The wrist force/torque sensor is either a preset (``ft_sensor``, see
     :data:`~peg_ctrl.sim.ft_model.FT_PRESETS`) or the four fields ``force_noise``,
-    ``torque_noise``, ``ft_latency`` and ``ft_bias_drift`` (:class:`FTSensorModel`'s, see
+    ``torque_noise``, ``ft_latency``, ``ft_bias_drift`` and ``ft_rate`` (:class:`FTSensorModel`'s, see
     docs/sensing.md); :attr:`ft_model` is the model in effect.
     """
 
@@ -99,7 +99,8 @@ class DomainConfig:
     torque_noise: float = 0.0  # std of noise on each F/T torque channel [N m]
     ft_latency: float = 0.0  # the F/T reading arrives this late [s]
     ft_bias_drift: float = 0.0  # random walk of the F/T force bias [N/sqrt(s)]
-    ft_sensor: str = ""  # an F/T preset (ideal, wrist, forge) instead of the four fields above
+    ft_rate: float = 0.0  # the F/T sensor's sample rate [Hz], held between samples; 0: every control period
+    ft_sensor: str = ""  # an F/T preset (ideal, wrist, mini45, forge) instead of the five fields above
 
     def __post_init__(self) -> None:
         for name in ("peg_mass_scale", "friction_scale", "gain_scale"):
@@ -121,7 +122,7 @@ class DomainConfig:
 
     @property
     def ft_model(self) -> FTSensorModel:
-        """The wrist F/T sensor in effect: the preset ``ft_sensor``, else the four fields."""
+        """The wrist F/T sensor in effect: the preset ``ft_sensor``, else the five fields."""
         if self.ft_sensor:
             return ft_preset(self.ft_sensor, where="domain.ft_sensor")
         return FTSensorModel(
@@ -129,6 +130,7 @@ class DomainConfig:
             torque_noise=self.torque_noise,
             latency=self.ft_latency,
             bias_drift=self.ft_bias_drift,
+            rate=self.ft_rate,
         )
 
     @property
@@ -144,7 +146,7 @@ class DomainConfig:
 
 
 # DomainConfig's fields of the F/T sensor model, in FTSensorModel's order.
-_FT_FIELDS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift")
+_FT_FIELDS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift", "ft_rate")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -10,15 +10,19 @@ Task
     once the peg is seated, still in the hand.
 
 Disturbances (``task.*``, drawn per seed from the reset's random generator)
-    ``lateral_error`` [m]: the peg axis meets the mouth plane this far from the hole axis, in a
-    direction drawn uniformly; the task believes it is centred, so this is the lateral error at
-    first contact (exactly, when ``position_noise`` is 0 and the strategy moves straight down).
-    ``tilt_error`` [rad]: the peg is tilted in the grasp by this angle, in the plane of the pads;
-    the gripper's yaw is drawn uniformly, so the tilt's direction is uniform. The task believes the
-    peg is upright in the hand. ``position_noise`` [m]: standard deviation of Gaussian noise on
-    the observed hole position (x and y); the task first moves to where it observes the hole.
-    The hole's size (``scene.assets.clearance``, ``scene.assets.chamfer``) and the physics
-    (``physics.profile``, ``precision`` for contact studies) are the scene's.
+    ``lateral_error`` [m]: the peg sits this far from where the task believes it in the hand (an
+    in-hand offset, horizontal at the start, in a direction drawn uniformly), and its axis meets
+    the mouth plane this far from the hole axis at the start: a task that moves its believed lower
+    end over the hole meets the mouth this far off (exactly, when ``position_noise`` is 0 and the
+    peg is upright). ``tilt_error`` [rad]: the peg is tilted in the grasp by this angle, in the
+    plane of the pads; the gripper's yaw is drawn uniformly, so the tilt's direction is uniform.
+    The task believes the peg is upright in the hand. ``position_noise`` [m]: standard deviation
+    per axis (x, y) of the hole's observed position, a world-frame estimate (a camera's) drawn
+    once per episode, independent of the peg in the hand: nothing learnt about the grasp moves it.
+    ``drawing_tolerance`` [m]: the block, its face and its hole, sits off the drawing by a draw
+    uniform within ± this per axis; the task knows the drawing (the face's height
+    ``block_top``). The hole's size (``scene.assets.clearance``, ``scene.assets.chamfer``) and
+    the physics (``physics.profile``, ``precision`` for contact studies) are the scene's.
 
 What the task senses
     The gripper's state (with any sensor noise) and the force/torque sensor at the gripper mount,
@@ -77,7 +81,12 @@ from peg_ctrl.tasks.strategies.motions import about
 
 __all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
 
-_DISTURBANCES = ("lateral_error", "tilt_error", "position_noise")  # >= 0; every other number > 0
+_DISTURBANCES = (
+    "lateral_error",
+    "tilt_error",
+    "position_noise",
+    "drawing_tolerance",
+)  # >= 0; every other number > 0
 _TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
 _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 _SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
@@ -89,9 +98,10 @@ class HeldInsertionConfig(TaskSpec):
 
     name: ClassVar[str] = "held_insertion"
     strategy: StrategyConfig = ForceConfig()  # a name or {name: ..., <its fields>}
-    lateral_error: float = 0.0015  # peg axis to hole axis at the mouth at first contact [m]
+    lateral_error: float = 0.0015  # the peg's offset in the hand from the believed grasp [m]
     tilt_error: float = 0.0  # peg tilt in the grasp [rad]
-    position_noise: float = 0.0  # std of the observed hole position, x and y [m]
+    position_noise: float = 0.0  # std of the hole's observed position (world frame), x and y [m]
+    drawing_tolerance: float = 0.0  # the block sits off its drawing within ± this, per axis [m]
     start_height: float = 0.003  # the peg's lower end above the mouth at the start [m]
     grip_above_centre: float = 0.02  # pads above the peg's centre: the fingers clear the block [m]
     settle_time: float = 0.3  # hold after the start while the sensor is tared [s]
@@ -197,14 +207,13 @@ class HeldInsertionTask(PlannedMoves):
         self.contact = Detector(k_on=4.0, k_off=2.0, hold=_TOUCH_HOLD)
         self.disturbance: Disturbance | None = None
         self.observed_hole = np.zeros(2)  # where the task believes the hole is (x, y) [m]
+        self.drawing_sides = np.zeros(4)  # the drawing's hole axis to the +x, -x, +y, -y sides [m]
         self._b_body = np.zeros(3)  # nominal lower end of the peg, gripper frame [m]
         self._up_body = np.zeros(3)  # nominal peg axis (up), gripper frame
         self._goal = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)
         self.seated = SeatedHold(success.consecutive_steps)
         self._grip_length = config.grip_above_centre + 0.5 * float(a.peg_length)  # pads to lower end [m]
         self._grasp_body = np.zeros(3)  # where the pads hold the peg's axis, gripper frame [m]
-        self._start = Waypoint.of((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)  # the pose at the start
-        self._noise = np.zeros(2)  # the observation noise on the hole's position [m]
         self.z_face = self.block_top  # the face's height as the believed lower end senses it [m]
         self.aligned_tilt: float | None = None  # the peg's tilt in the hand a calibration found [rad]
         self._wrist: WristSensor | None = None
@@ -294,12 +303,12 @@ class HeldInsertionTask(PlannedMoves):
         )
         up = rotate(q_peg, np.array([0.0, 0.0, 1.0]))
         up = up if up[2] > 0 else -up
-        hx, hy = scene.hole_xy
+        hx, hy, top = self._place_block(model, rng)
         mouth = np.array(
             [
                 hx + c.lateral_error * math.cos(d.lateral_direction),
                 hy + c.lateral_error * math.sin(d.lateral_direction),
-                self.block_top,
+                top,
             ]
         )
         bottom = mouth + (c.start_height / up[2]) * up
@@ -316,19 +325,18 @@ class HeldInsertionTask(PlannedMoves):
         )
         close_on_held_peg(model, data, rig, pinch, q_grip)
         data.time = 0.0  # the closing builds the start state; the episode's clock starts here
-        # The nominal grasp (peg upright in the hand), in the gripper frame.
+        # The believed grasp, in the gripper frame: the nominal one (peg upright in the hand),
+        # lateral_error off the true one; the hole as a camera sees it, in the world frame.
         half = 0.5 * scene.assets.peg_length
         b_world = -(c.grip_above_centre + half) * np.array([0.0, 0.0, 1.0]) + rotate(
             q_grip, np.array([0.0, 0.0, -GRASP_OFFSET])
         )
-        self._b_body = rotate_inv(q_grip, b_world)
+        self._b_body = rotate_inv(q_grip, b_world - (mouth - np.array([hx, hy, top])))
         self._up_body = rotate_inv(q_grip, np.array([0.0, 0.0, 1.0]))
-        believed_bottom = pinch + b_world
-        self.observed_hole = believed_bottom[:2] + np.asarray(d.noise)
+        self.observed_hole = np.array([hx, hy]) + np.asarray(d.noise)
         self.contact.reset()
         self._v_samples: list[float] = []
         self._v_noise = 0.0  # standard deviation of the sensed vertical speed [m/s]
-        self._noise = np.asarray(d.noise, dtype=float)
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
         self.aligned_tilt = None
@@ -342,7 +350,6 @@ class HeldInsertionTask(PlannedMoves):
     def start(self, obs: Observation) -> None:
         s = obs.gripper
         self._goal = Waypoint.of(s.p_world, s.quat_world, 0.0)
-        self._start = self._goal
         self.machine.start("settle", obs)
 
     def target(self, obs: Observation) -> GripperTarget:
@@ -372,6 +379,19 @@ class HeldInsertionTask(PlannedMoves):
         return classify_end_state(
             m, clearance=self.hole_radius - self.radius, chamfer=self.chamfer, radius=self.radius
         )
+
+    def _place_block(self, model: mujoco.MjModel, rng: np.random.Generator) -> tuple[float, float, float]:
+        """Put the block off its drawing by ``drawing_tolerance`` (nothing drawn at 0): the block
+        (its face and hole) by one draw per axis, the drawing's distances from the hole's axis to
+        the four sides (+x, -x, +y, -y: ``drawing_sides`` [m]) by one each. The insertion monitor
+        measures against the true hole. Returns the hole's mouth (x, y, z) [m]."""
+        tol = self.cfg.drawing_tolerance
+        delta = rng.uniform(-tol, tol, size=7) if tol > 0 else np.zeros(7)
+        model.body_pos[model.body("block").id] = np.asarray(self.scene.block_pos) + delta[:3]
+        half = np.repeat(0.5 * np.asarray(self.scene.assets.block_size[:2], dtype=float), 2)
+        self.drawing_sides = half + delta[3:]
+        hx, hy = self.scene.hole_xy
+        return self.insertion.locate(hx + delta[0], hy + delta[1], self.block_top + delta[2])
 
     # -- what the task believes -------------------------------------------------------------------
     def believed_bottom(self, obs: Observation) -> NDArray[np.float64]:
@@ -410,16 +430,13 @@ class HeldInsertionTask(PlannedMoves):
 
     def revise_axis(self, up_body: NDArray[np.float64], state: ControlState) -> None:
         """A calibration found the peg's axis in the hand (``up_body``, gripper frame). The pads
-        still hold it where they did, so the lower end is ``grip_length`` below them along it;
-        the hole follows (the task believes the peg started centred)."""
+        still hold it where they did, so the lower end is ``grip_length`` below them along it.
+        The observed hole is a world-frame estimate: it does not move."""
         up_body = np.asarray(up_body, dtype=float) / np.linalg.norm(up_body)
         self.aligned_tilt = math.acos(max(-1.0, min(1.0, float(np.dot(up_body, self._up_body)))))
         self._up_body = up_body
         self._b_body = self._grasp_body - self._grip_length * up_body
         self.wrist.move_centre(self._b_body, state)
-        start = self._start
-        start_tip = np.asarray(start.p_world) + rotate(np.asarray(start.quat_world), self._b_body)
-        self.observed_hole = start_tip[:2] + self._noise
 
     def recalibrate(self, obs: Observation, *, quat: NDArray[np.float64] | None = None) -> None:
         """The peg's end lies flat on the face: its axis is vertical now (with the gripper at

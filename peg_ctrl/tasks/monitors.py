@@ -128,6 +128,11 @@ class InsertionMonitor:
         self.criterion = criterion
         self.last: InsertionMeasure | None = None
 
+    def locate(self, hole_x: float, hole_y: float, block_top: float) -> tuple[float, float, float]:
+        """The hole is where the block truly is (off its drawing): mouth (x, y, z) [m]. Returns it."""
+        self.hole_x, self.hole_y, self.block_top = float(hole_x), float(hole_y), float(block_top)
+        return self.hole_x, self.hole_y, self.block_top
+
     def measure(self, peg: PegObservation) -> InsertionMeasure:
         # Plain floats: this runs every control step.
         ax, ay, az = peg.axis_world.tolist()

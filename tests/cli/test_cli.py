@@ -159,7 +159,7 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
         (["run", "--config", "missing.yaml"], "does not exist"),
         (
             ["run", "--set", "domain.ft_sensor=nope"],
-            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, wrist",
+            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, mini45, wrist",
         ),
         (
             ["run", "--set", "domain.ft_sensor=wrist", "--set", "domain.torque_noise=0.01"],

@@ -309,7 +309,7 @@ def test_contact_to_seat_is_none_unless_contact_came_first(
         ({"ft_bias_drift": float("inf")}, "domain.ft_bias_drift must be finite and >= 0, got inf"),
         (
             {"ft_sensor": "nope"},
-            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, wrist",
+            "domain.ft_sensor: unknown F/T sensor preset 'nope'; known: forge, ideal, mini45, wrist",
         ),
         (
             {"ft_sensor": "wrist", "force_noise": 0.1},
@@ -329,14 +329,20 @@ def test_sensor_noise_errors_name_the_field(domain: dict, message: str) -> None:
     assert str(exc.value) == message
 
 
-def test_the_ft_model_is_the_preset_or_the_four_fields() -> None:
+def test_the_ft_model_is_the_preset_or_the_five_fields() -> None:
     assert DomainConfig().ft_model == FTSensorModel()
     for name, preset in FT_PRESETS.items():
         assert DomainConfig(ft_sensor=name).ft_model == preset
-    fields = DomainConfig(force_noise=0.2, torque_noise=0.003, ft_latency=0.02, ft_bias_drift=0.05)
-    assert fields.ft_model == FTSensorModel(
-        force_noise=0.2, torque_noise=0.003, latency=0.02, bias_drift=0.05
+    fields = DomainConfig(
+        force_noise=0.2, torque_noise=0.003, ft_latency=0.02, ft_bias_drift=0.05, ft_rate=100.0
     )
+    assert fields.ft_model == FTSensorModel(
+        force_noise=0.2, torque_noise=0.003, latency=0.02, bias_drift=0.05, rate=100.0
+    )
+    with pytest.raises(ConfigError, match=r"^domain\.ft_rate must be finite and >= 0, got -1\.0$"):
+        DomainConfig(ft_rate=-1.0)
+    with pytest.raises(ConfigError, match=r"^domain\.ft_rate: set either domain\.ft_sensor"):
+        DomainConfig(ft_sensor="wrist", ft_rate=100.0)
 
 
 @pytest.mark.parametrize(

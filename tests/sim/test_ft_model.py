@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 
@@ -152,22 +153,33 @@ def test_the_same_seed_gives_the_same_readings() -> None:
 def test_the_presets() -> None:
     assert FT_PRESETS == {
         "ideal": FTSensorModel(force_noise=0.0, torque_noise=0.0, latency=0.0, bias_drift=0.0),
-        "wrist": FTSensorModel(force_noise=0.1, torque_noise=0.005, latency=0.01, bias_drift=0.01),
-        "forge": FTSensorModel(force_noise=1.0, torque_noise=0.01, latency=0.0, bias_drift=0.0),
+        "wrist": FTSensorModel(
+            force_noise=0.1, torque_noise=0.005, latency=0.01, bias_drift=0.01, rate=100.0
+        ),
+        "mini45": FTSensorModel(
+            force_noise=0.05, torque_noise=0.0005, latency=0.001, bias_drift=0.01, rate=2000.0
+        ),
+        "forge": FTSensorModel(force_noise=1.0, torque_noise=0.01, latency=0.0, bias_drift=0.0, rate=1000.0),
     }
-    assert [name for name, m in FT_PRESETS.items() if m.noisy] == ["wrist", "forge"]
+    assert [name for name, m in FT_PRESETS.items() if m.noisy] == ["wrist", "mini45", "forge"]
     assert ft_preset("forge") is FT_PRESETS["forge"]
 
 
 def test_an_unknown_preset_lists_the_known_ones() -> None:
-    message = "x.ft: unknown F/T sensor preset 'nope'; known: forge, ideal, wrist"
+    message = "x.ft: unknown F/T sensor preset 'nope'; known: forge, ideal, mini45, wrist"
     with pytest.raises(UnknownComponent, match=f"^{re.escape(message)}$"):
         ft_preset("nope", where="x.ft")
 
 
 @pytest.mark.parametrize(
     ("field", "unit"),
-    [("force_noise", "N"), ("torque_noise", "N m"), ("latency", "s"), ("bias_drift", "N/sqrt(s)")],
+    [
+        ("force_noise", "N"),
+        ("torque_noise", "N m"),
+        ("latency", "s"),
+        ("bias_drift", "N/sqrt(s)"),
+        ("rate", "Hz"),
+    ],
 )
 @pytest.mark.parametrize("value", [-0.1, math.nan, math.inf])
 def test_a_bad_value_is_refused_naming_the_field_and_the_range(field: str, unit: str, value: float) -> None:
@@ -180,6 +192,64 @@ def test_a_bad_value_is_refused_naming_the_field_and_the_range(field: str, unit:
 def test_a_bad_reading_period_is_refused(dt: float) -> None:
     with pytest.raises(ConfigError, match=r"^dt must be finite and > 0 s"):
         FTSensorStream(FT_PRESETS["wrist"], dt=dt, rng=np.random.default_rng(0))
+
+
+# -- the sensor's own rate: a sample held between ticks of its clock ----------------------------
+
+
+def test_a_100_hz_sensor_read_at_1_khz_holds_each_sample_for_ten_periods() -> None:
+    true = np.random.default_rng(3).normal(size=(200, 6))
+    model = FTSensorModel(force_noise=0.1, torque_noise=0.005, rate=100.0)
+    readings = _readings(model, true, dt=0.001, seed=4)
+    blocks = readings.reshape(20, 10, 6)
+    np.testing.assert_array_equal(blocks, np.repeat(blocks[:, :1], 10, axis=1))  # held
+    noise = blocks[:, 0, :3] - true[::10, :3]  # each sample is the wrench at its tick plus noise
+    assert np.all(np.abs(noise) < 0.5) and 0.05 < noise.std() < 0.2
+    assert len(np.unique(readings[:, 0])) == 20
+
+
+def test_held_noise_averages_ten_times_fewer_samples() -> None:
+    """The point of the rate: a second of 1 kHz readings from a 100 Hz sensor averages 100
+    independent samples, not 1000, so its mean is sqrt(10) times noisier."""
+    true = np.zeros((1000, 6))
+    means = {
+        rate: np.std(
+            [
+                _readings(FTSensorModel(force_noise=1.0, rate=rate), true, dt=0.001, seed=s)[:, 2].mean()
+                for s in range(200)
+            ]
+        )
+        for rate in (0.0, 100.0)
+    }
+    assert means[0.0] == pytest.approx(1.0 / math.sqrt(1000), rel=0.15)
+    assert means[100.0] == pytest.approx(1.0 / math.sqrt(100), rel=0.15)
+
+
+@pytest.mark.parametrize("rate", [1000.0, 5000.0])
+def test_a_rate_at_or_above_the_control_rate_reads_as_no_rate(rate: float) -> None:
+    true = np.random.default_rng(5).normal(size=(100, 6))
+    wrist = FT_PRESETS["wrist"]
+    fast = dataclasses.replace(wrist, rate=rate)
+    np.testing.assert_array_equal(
+        _readings(fast, true, dt=0.001, seed=6),
+        _readings(dataclasses.replace(wrist, rate=0.0), true, dt=0.001, seed=6),
+    )
+
+
+def test_a_held_sample_is_late_by_its_latency_and_carries_the_bias_of_its_tick() -> None:
+    true = np.zeros((40, 6))
+    true[:, 2] = np.arange(40.0)  # a ramp: the reading tells which period it was sampled in
+    model = FTSensorModel(latency=0.003, rate=250.0)  # a sample every 4 periods, 3 periods late
+    readings = _readings(model, true, dt=0.001, seed=0)[:, 2]
+    expected = np.maximum(0.0, np.floor(np.arange(40) / 4) * 4 - 3)
+    np.testing.assert_array_equal(readings, expected)
+
+
+def test_a_rate_that_is_not_a_whole_number_of_periods_samples_at_the_first_period_after_each_tick() -> None:
+    true = np.zeros((30, 6))
+    true[:, 0] = np.arange(30.0)
+    readings = _readings(FTSensorModel(rate=400.0), true, dt=0.001, seed=0)[:, 0]  # ticks every 2.5 periods
+    assert sorted(set(readings.tolist())) == [0, 3, 5, 8, 10, 13, 15, 18, 20, 23, 25, 28]
 
 
 # -- the delay line the stream and the wrench predictor share -----------------------------------

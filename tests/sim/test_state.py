@@ -86,15 +86,16 @@ def _contacts_with_arrays(reader: StateReader, data: mujoco.MjData) -> list[tupl
         entry[3] += 1
         entry[4] = max(entry[4], con.includemargin - float(con.dist))
     return [
-        (pair, f.tobytes(), float(np.linalg.norm(f)), (p / total).tobytes(), n, max(pen, 0.0))
+        (pair, f, float(np.linalg.norm(f)), p / total, n, max(pen, 0.0))
         for pair, (f, p, total, n, pen) in sorted(sums.items())
         if total >= reader.contact_threshold_n
     ]
 
 
-def test_contacts_and_the_sensor_reduction_are_the_arrays_to_the_bit() -> None:
-    """The held peg pressed onto the block: the plain-float contacts() and SensorBlock.reduce()
-    give the very numbers the array code gives."""
+def test_contacts_and_the_sensor_reduction_are_the_arrays_to_the_last_bits() -> None:
+    """The held peg pressed onto the block: SensorBlock.reduce() gives the very numbers the array
+    code gives; the plain-float contacts() the same to within a few units in the last place
+    (numpy's matrix product and norm may sum in another order, with SIMD or fused operations)."""
     from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
 
     cfg = {"task": {"name": "held_insertion", "strategy": "force"}, "physics": {"profile": "precision"}}
@@ -106,18 +107,16 @@ def test_contacts_and_the_sensor_reduction_are_the_arrays_to_the_bit() -> None:
         forces, pens = sensors.reduce()
         block = sensors.block_force
         assert (forces, pens) == sensors._reduce_arrays() and block == sensors.block_force
-        contacts = [
-            (
-                c.pair,
-                c.force_world.tobytes(),
-                c.magnitude,
-                c.position_world.tobytes(),
-                c.count,
-                c.max_penetration_m,
-            )
-            for c in loop.reader.contacts(loop.data)
+        contacts = loop.reader.contacts(loop.data)
+        reference = _contacts_with_arrays(loop.reader, loop.data)
+        assert [(c.pair, c.count, c.max_penetration_m) for c in contacts] == [
+            (r[0], r[4], r[5]) for r in reference
         ]
-        assert contacts == _contacts_with_arrays(loop.reader, loop.data)
+        for c, (_, f, mag, p, _, _) in zip(contacts, reference, strict=True):
+            # relative to the vector's size: a small component is a difference of large terms
+            np.testing.assert_allclose(c.force_world, f, rtol=0.0, atol=1e-13 * mag)
+            np.testing.assert_allclose(c.position_world, p, rtol=0.0, atol=1e-15)
+            assert c.magnitude == pytest.approx(mag, rel=1e-13)
         touched += block[-1] > 0.0 and pens[0] > 0.0
     assert touched > 100  # the peg pressed on the block for a good part of it
     sensors.raw[0, 0] = np.nan  # a diverging step: numpy's NaN propagation, kept

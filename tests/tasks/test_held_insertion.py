@@ -12,6 +12,7 @@ import pytest
 from peg_ctrl.config import ConfigError, apply_overrides
 from peg_ctrl.errors import UnknownComponent
 from peg_ctrl.run.episode import EpisodeResult, build_loop, episode_config_from_mapping, run_episode
+from peg_ctrl.sim.rotations import rotate_inv
 from peg_ctrl.tasks import TASKS, HeldInsertionConfig
 from peg_ctrl.tasks.monitors import InsertionMeasure, classify_end_state
 from peg_ctrl.tasks.pick_and_place import TaskConfig
@@ -116,6 +117,57 @@ def test_position_noise_moves_the_observed_hole() -> None:
     shift = loops[1].observed_hole - loops[0].observed_hole  # type: ignore[attr-defined]
     np.testing.assert_allclose(shift, d.noise, atol=1e-12)
     assert 0.0 < float(np.hypot(*shift)) < 0.005
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_the_hole_is_observed_in_the_world_and_the_offset_is_in_the_hand(seed: int) -> None:
+    """The observed hole is the true hole plus the camera's noise; the lateral error is the
+    grasp's (the believed lower end is it off the true one); recalibrating the axis in the
+    hand moves neither the observed hole nor that offset."""
+    cfg = config(
+        f"seed={seed}", "task.lateral_error=0.003", "task.tilt_error=0.0349", "task.position_noise=0.001"
+    )
+    loop = build_loop(cfg)
+    obs = loop.reset(np.random.default_rng(seed))
+    task: Any = loop.task
+    hole = np.asarray(cfg.scene.hole_xy)
+    np.testing.assert_allclose(task.observed_hole, hole + np.asarray(task.disturbance.noise), atol=1e-12)
+    true_tip = obs.peg.bottom_world
+    # Before calibration: the offset in the hand plus the tilt's shift of the lower end.
+    tilt_shift = task.grip_length * math.sin(0.0349)
+    shift = float(np.hypot(*(task.believed_bottom(obs) - true_tip)[:2]))
+    assert 0.003 - tilt_shift - 1e-4 < shift < 0.003 + tilt_shift + 1e-4
+    before = task.observed_hole.copy()
+    axis = obs.peg.axis_world if obs.peg.axis_world[2] > 0 else -obs.peg.axis_world
+    task.revise_axis(rotate_inv(obs.gripper.quat_world, axis), obs.gripper)  # the true axis
+    np.testing.assert_array_equal(task.observed_hole, before)
+    offset = (task.believed_bottom(obs) - true_tip)[:2]
+    assert float(np.hypot(*offset)) == pytest.approx(0.003, abs=1e-4)  # the grasp's offset alone
+
+
+def test_the_block_sits_off_its_drawing_within_the_tolerance() -> None:
+    tops = []
+    for seed in range(6):
+        loop = build_loop(config(f"seed={seed}", "task.drawing_tolerance=0.0001", "task.lateral_error=0.0"))
+        loop.reset(np.random.default_rng(seed))
+        task: Any = loop.task
+        monitor = task.insertion
+        true = np.array([monitor.hole_x, monitor.hole_y, monitor.block_top])
+        nominal = np.array([*loop.task.scene.hole_xy, task.block_top])  # the drawing
+        assert np.all(np.abs(true - nominal) <= 0.0001) and np.any(true != nominal)
+        np.testing.assert_allclose(loop.data.body("block").xpos[:2], true[:2], atol=1e-12)
+        # The peg starts start_height above the true mouth, on the true hole's axis.
+        assert -monitor.measure(loop.peg).depth_m == pytest.approx(0.003, abs=1e-4)
+        assert monitor.measure(loop.peg).lateral_error_m < 5e-5
+        # The drawing's distances to the sides: the true 40 mm, each off within the tolerance.
+        assert np.all(np.abs(task.drawing_sides - 0.04) <= 0.0001) and len(set(task.drawing_sides)) == 4
+        tops.append(true[2])
+    assert len(set(tops)) == 6
+    # No tolerance, nothing drawn: the block on its drawing.
+    loop = build_loop(config("seed=0"))
+    loop.reset(np.random.default_rng(0))
+    np.testing.assert_array_equal(loop.data.body("block").xpos, loop.task.scene.block_pos)  # type: ignore[attr-defined]
+    np.testing.assert_array_equal(loop.task.drawing_sides, [0.04] * 4)  # type: ignore[attr-defined]
 
 
 # -- end states --------------------------------------------------------------------------------
