@@ -90,6 +90,7 @@ _DISTURBANCES = (
 _TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
 _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 _SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
+_SPEED_HZ = 15.0  # the sensed hand velocity's low-pass (encoder velocities are differences) [Hz]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -336,7 +337,9 @@ class HeldInsertionTask(PlannedMoves):
         self.observed_hole = np.array([hx, hy]) + np.asarray(d.noise)
         self.contact.reset()
         self._v_samples: list[float] = []
-        self._v_noise = 0.0  # standard deviation of the sensed vertical speed [m/s]
+        self._v_noise = 0.0  # standard deviation of the filtered vertical speed [m/s]
+        self._v_filtered: NDArray[np.float64] | None = None
+        self._v_alpha = 1.0 - math.exp(-2.0 * math.pi * _SPEED_HZ * self.control_dt)
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
         self.aligned_tilt = None
@@ -353,7 +356,19 @@ class HeldInsertionTask(PlannedMoves):
         self.machine.start("settle", obs)
 
     def target(self, obs: Observation) -> GripperTarget:
+        v = obs.gripper.v_world
+        if self._v_filtered is None:
+            self._v_filtered = np.array(v, dtype=float)
+        else:
+            self._v_filtered += self._v_alpha * (v - self._v_filtered)
         return self.machine.update(obs)
+
+    @property
+    def hand_velocity(self) -> NDArray[np.float64]:
+        """The hand's sensed linear velocity through a first-order low-pass of ``_SPEED_HZ``,
+        world frame [m/s] (a copy): a still hand is told from the noise of its speed sensing."""
+        assert self._v_filtered is not None, "target() first"
+        return self._v_filtered.copy()
 
     def evaluate(self, obs: Observation) -> Evaluation:
         m = self.insertion.measure(obs.peg)
@@ -467,7 +482,8 @@ class HeldInsertionTask(PlannedMoves):
 
     @property
     def speed_noise(self) -> float:
-        """Standard deviation of the sensed vertical speed, measured while tared [m/s]."""
+        """Standard deviation of the filtered vertical speed (:attr:`hand_velocity`), measured while
+        tared [m/s]."""
         return self._v_noise
 
     def seated_detected(self, obs: Observation) -> bool:
@@ -477,7 +493,7 @@ class HeldInsertionTask(PlannedMoves):
         if self.believed_depth(obs) < self.min_depth:
             return False
         sigma = max(self._v_noise, _SPEED_RESOLUTION)
-        return abs(float(obs.gripper.v_world[2])) < self.contact.k_on * sigma
+        return abs(float(self.hand_velocity[2])) < self.contact.k_on * sigma
 
     def in_bore(self, obs: Observation) -> str | None:
         """``"entered"`` once the believed lower end is past the chamfer, else None."""
@@ -489,7 +505,7 @@ class HeldInsertionTask(PlannedMoves):
     def _tare(self, obs: Observation) -> None:
         """Tare the wrench estimate; measure the speed sensing's noise (the hand is at rest)."""
         self.wrist.accumulate_tare(obs.gripper)
-        self._v_samples.append(float(obs.gripper.v_world[2]))
+        self._v_samples.append(float(self.hand_velocity[2]))
         if len(self._v_samples) > 1:
             self._v_noise = float(np.std(self._v_samples, ddof=1))
 

@@ -21,6 +21,7 @@ from peg_ctrl.tasks.strategies.base import (
     TaskDisturbance,
 )
 from peg_ctrl.tasks.strategies.force import ForceConfig, ForceStrategy
+from peg_ctrl.tasks.strategies.locate import LocateConfig, LocateStrategy
 from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
 from peg_ctrl.tasks.strategies.spiral import SpiralConfig, SpiralStrategy
 from peg_ctrl.tasks.strategies.straight import StraightConfig, StraightStrategy
@@ -38,6 +39,8 @@ __all__ = [
     "AlignStrategy",
     "ForceConfig",
     "ForceStrategy",
+    "LocateConfig",
+    "LocateStrategy",
     "ProbeConfig",
     "ProbeStrategy",
     "SpiralConfig",
@@ -53,7 +56,8 @@ __all__ = [
 
 #: Strategy name -> its config class (whose ``build(task)`` makes the strategy).
 STRATEGIES: dict[str, type[StrategyConfig]] = {
-    cfg.name: cfg for cfg in (StraightConfig, ForceConfig, SpiralConfig, TiltConfig, AlignConfig, ProbeConfig)
+    cfg.name: cfg
+    for cfg in (StraightConfig, ForceConfig, SpiralConfig, TiltConfig, AlignConfig, ProbeConfig, LocateConfig)
 }
 
 

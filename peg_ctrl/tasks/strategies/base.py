@@ -67,8 +67,9 @@ class HeldInsertion(Protocol):
     """The held-insertion task as a strategy sees it.
 
     Geometry from the drawing [m]: ``block_top`` (the hole's mouth), ``radius`` (the peg's),
-    ``hole_radius`` and ``chamfer``. Belief: ``observed_hole`` (x, y) [m] and ``z_face`` [m],
-    which a strategy may revise (:meth:`recalibrate`). Motion: ``goal`` (the last planned
+    ``hole_radius``, ``chamfer`` and ``drawing_sides`` (the hole's axis to the block's +x, -x, +y,
+    -y sides). Belief: ``observed_hole`` (x, y) [m, world frame: a camera's estimate] and
+    ``z_face`` [m], which a strategy may revise (:meth:`recalibrate`). Motion: ``goal`` (the last planned
     waypoint), :meth:`move` plans from it; ``planner``, ``limits``. Sensing: ``wrist`` (the
     estimated contact wrench about the peg's believed lower end, with its noise:
     :class:`~peg_ctrl.sim.sensing.WristSensor`) and ``contact`` (the detection of a push on the
@@ -87,6 +88,7 @@ class HeldInsertion(Protocol):
     hole_radius: float
     chamfer: float
     observed_hole: _Vec
+    drawing_sides: _Vec
     z_face: float
     machine: PhaseMachine
 
@@ -97,6 +99,9 @@ class HeldInsertion(Protocol):
 
     @property
     def speed_noise(self) -> float: ...
+
+    @property
+    def hand_velocity(self) -> _Vec: ...
 
     @property
     def goal(self) -> Waypoint: ...

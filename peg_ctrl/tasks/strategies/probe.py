@@ -185,7 +185,7 @@ class Landing:
             return True
         task, c = self.task, self.cfg
         limit = max(c.stop_speed, task.contact.k_on * task.speed_noise)
-        speed = abs(float(obs.gripper.v_world[2]))
+        speed = abs(float(task.hand_velocity[2]))
         self._moved = self._moved or speed > 2.0 * limit
         if speed >= limit or not (self._moved or obs.t - self._t0 > 0.05):
             self._still = []
@@ -363,10 +363,11 @@ class ProbeStrategy(Strategy):
         """Lift, over the belief's first landing point, down to the hover height."""
         t, c, a = self.task, self.cfg, self.task.scene.assets
         q = np.asarray(t.goal.quat_world)
+        centre, sigma, radius = self.hole_prior()
         self.belief = HoleBelief(
-            (float(t.observed_hole[0]), float(t.observed_hole[1])),
-            radius=c.search_radius,
-            sigma=c.search_sigma,
+            (float(centre[0]), float(centre[1])),
+            radius=radius,
+            sigma=sigma,
             capture=a.clearance + a.chamfer - c.drop_min,
         )
         first = self.belief.best_probe()
@@ -385,6 +386,12 @@ class ProbeStrategy(Strategy):
         )
         t.goal = self.tip_waypoint(hover, q)
         return TrajectorySequence(parts)
+
+    def hole_prior(self) -> tuple[_Vec, float, float]:
+        """The search's prior over the hole: its centre (x, y) [m], standard deviation [m] and
+        extent [m]: the observed hole, ``search_sigma``, ``search_radius``."""
+        t, c = self.task, self.cfg
+        return np.asarray(t.observed_hole, dtype=float), c.search_sigma, c.search_radius
 
     def _enter_probe(self, obs: Observation) -> Motion:
         assert self.belief is not None
@@ -643,7 +650,7 @@ class Centring:
         if self.centre is not None:
             return
         c, task = self.cfg, self.task
-        v = float(np.hypot(*obs.gripper.v_world[:2]))
+        v = float(np.hypot(*task.hand_velocity[:2]))
         limit = max(0.5 * c.stop_speed, task.contact.k_on * task.speed_noise)
         if v >= limit or obs.t - self._t0 < _WALL_SETTLE:
             self._still = []
