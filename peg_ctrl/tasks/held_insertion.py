@@ -11,7 +11,9 @@ Task
 
 Disturbances (``task.*``, drawn per seed from the reset's random generator)
     ``lateral_error`` [m]: the peg sits this far from where the task believes it in the hand (an
-    in-hand offset, horizontal at the start, in a direction drawn uniformly), and its axis meets
+    in-hand offset along the pads' plane, across the closing direction, either way: Isaac Lab's
+    Factory tasks draw theirs in that plane too; with the gripper's yaw uniform, its direction in
+    the world is uniform), and its axis meets
     the mouth plane this far from the hole axis at the start: a task that moves its believed lower
     end over the hole meets the mouth this far off (exactly, when ``position_noise`` is 0 and the
     peg is upright). ``tilt_error`` [rad]: the peg is tilted in the grasp by this angle, in the
@@ -157,7 +159,10 @@ class HeldInsertionConfig(TaskSpec):
 
 @dataclasses.dataclass(frozen=True)
 class Disturbance:
-    """One seed's draw: lateral error direction and gripper yaw [rad], observation noise (x, y) [m]."""
+    """One seed's draw: the in-hand offset's direction in the world and the gripper's yaw [rad],
+    the tilt's sign, observation noise (x, y) [m]. The offset lies in the pads' plane (a peg held
+    between two pads cannot sit off along their closing direction): ``draw`` takes its sign from a
+    uniform angle, and :meth:`in_pads_plane` turns it along the plane once the yaw is known."""
 
     lateral_direction: float
     yaw: float
@@ -170,6 +175,13 @@ class Disturbance:
         sign = 1.0 if rng.uniform() < 0.5 else -1.0
         nx, ny = (float(v) for v in rng.normal(0.0, 1.0, size=2) * position_noise)
         return cls(direction, yaw, sign, (nx, ny))
+
+    def in_pads_plane(self, closing: NDArray[np.float64]) -> Disturbance:
+        """The offset along the pads' plane, horizontal, across the closing direction
+        ``closing`` (world), on the side the drawn angle is on."""
+        across = math.atan2(float(closing[0]), -float(closing[1]))  # z x closing
+        side = 0.0 if math.cos(self.lateral_direction - across) >= 0 else math.pi
+        return dataclasses.replace(self, lateral_direction=across + side)
 
 
 class HeldInsertionTask(PlannedMoves):
@@ -299,6 +311,7 @@ class HeldInsertionTask(PlannedMoves):
         q_grip = quat_mul(yaw_quat(d.yaw), Q_TURN)
         # Tilt in the plane of the pads: about the jaw's closing direction (the gripper's x).
         closing = rotate(q_grip, np.array([1.0, 0.0, 0.0]))
+        d = self.disturbance = d.in_pads_plane(closing)
         q_peg = quat_mul(
             about(closing, d.tilt_sign * c.tilt_error), quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
         )
@@ -443,13 +456,22 @@ class HeldInsertionTask(PlannedMoves):
         """The peg's axis (up) as the task believes it, gripper frame (a copy)."""
         return self._up_body.copy()
 
-    def revise_axis(self, up_body: NDArray[np.float64], state: ControlState) -> None:
-        """A calibration found the peg's axis in the hand (``up_body``, gripper frame). The pads
-        still hold it where they did, so the lower end is ``grip_length`` below them along it.
-        The observed hole is a world-frame estimate: it does not move."""
+    def revise_axis(
+        self,
+        up_body: NDArray[np.float64],
+        state: ControlState,
+        *,
+        grasp_shift: NDArray[np.float64] | None = None,
+    ) -> None:
+        """A calibration found the peg's axis in the hand (``up_body``, gripper frame), and where
+        the pads hold it: ``grasp_shift`` [m] (gripper frame) from where the task believed. The
+        lower end is ``grip_length`` below that point along the axis. The observed hole is a
+        world-frame estimate: it does not move."""
         up_body = np.asarray(up_body, dtype=float) / np.linalg.norm(up_body)
         self.aligned_tilt = math.acos(max(-1.0, min(1.0, float(np.dot(up_body, self._up_body)))))
         self._up_body = up_body
+        if grasp_shift is not None:
+            self._grasp_body = self._grasp_body + np.asarray(grasp_shift, dtype=float)
         self._b_body = self._grasp_body - self._grip_length * up_body
         self.wrist.move_centre(self._b_body, state)
 

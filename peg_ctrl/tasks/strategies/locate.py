@@ -1,63 +1,73 @@
-"""``locate``: find the peg's end against the block's sides, then land it in the hole.
+"""``locate``: find the peg's end against the block's sides, then calibrate and insert.
 
 A camera's estimate of the hole is off by a millimetre or so, and the peg sits some millimetres
 off where the task believes it in the hand. The block's sides are datum surfaces of its drawing,
-a known distance from the hole's axis (to a machining tolerance): touching two of them with the
-peg's end locates that end against the hole, whatever the grasp's offset and the camera's error,
-with the pose alone (a touch's stop is read from the hand, not from a force threshold).
+a known distance from the hole's axis (to a machining tolerance). Touching a side with the peg's
+end tells where the end is against the hole; touching it again with the hand turned about the
+vertical through the believed end by ``yaw`` tells where the end is against the *hand* (the true
+end swings about the believed one by the offset between them). Two sides, two touches each: the
+end is located in the hand and against the hole, whatever the grasp's offset and the camera's
+error, from the pose alone (a touch's stop is read from the hand, not from a force threshold).
 
-Phases (``probe``'s, with ``sides`` before the transfer; :mod:`~peg_ctrl.tasks.strategies.probe`
-has the others):
+Knowing the end matters for the tilt calibration: ``probe``'s landings turn the hand about the
+pads' normal, and an end off the believed one by ``e`` across the pads rises or falls by
+``e sin(angle)`` as it turns, as a tilt of ``e / grip_length`` would (3 mm: 2.5 degrees).
 
-- ``approach``, ``touch``, ``rock``, ``reference``: the tilt in the hand from three landings on
-  a datum of the top face, the peg turned upright, the face's height;
-- ``sides``: the end lifted clear of the face, out beyond the -x side by ``side_gap`` more than
-  the drawing puts it, down to ``side_depth`` below the face; a pose-tracked approach along +x at
-  ``touch_speed`` until the hand stalls (its filtered speed along the approach below
-  ``stall_fraction`` of the command's); a lateral push at ``wall_force`` until it is still; the
-  end's position read. Back off, round the corner, the same along +y against the -y side. The
-  hole, as the task's belief of the end sees it: ``side + radius + the drawing's distance`` on
-  each axis;
+Phases:
+
+- ``approach``: the end out beyond the -x side by ``side_gap`` more than the drawing puts it
+  (seen from the camera's hole), ``side_depth`` below the face;
+- ``sides``: a pose-tracked approach along +x at ``touch_speed`` until the hand stalls (its
+  filtered speed along the approach below ``stall_fraction`` of the command's); a lateral push at
+  ``wall_force`` until it is still; the end's position read. Back off, turn by ``yaw`` about the
+  believed end, touch again; turn back, round the corner, the same along +y against the -y side.
+  The task's belief of the grasp moves to the located end (:meth:`HeldInsertion.revise_axis`);
+  the hole is ``side + radius + the drawing's distance`` on each axis;
+- ``datum``, ``touch``, ``rock``, ``reference``: ``probe``'s tilt calibration on a datum of the
+  top face, about the located end;
 - ``transfer``, ``probe``: over the located hole, landings from a tight prior about it
   (``located_sigma``, ``located_radius``); the first lands in the chamfer or the bore;
 - ``centre``, ``insert``, ``hold``: as ``probe``.
 
-A side the approach does not meet within ``side_gap`` beyond where the drawing puts it leaves the
+A side the approach does not meet within twice ``side_gap`` leaves the grasp as believed and the
 hole where the camera saw it, searched with ``probe``'s prior.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import ClassVar
 
 import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
+from peg_ctrl.sim.rotations import quat_mul, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.strategies.base import HeldInsertion, TaskDisturbance
 from peg_ctrl.tasks.strategies.probe import _WALL_SETTLE, ProbeConfig, ProbeStrategy
 
-__all__ = ["LocateConfig", "LocateStrategy", "SideTouches"]
+__all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_end"]
 
 _Vec = np.ndarray
-_X, _Y = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+_AXES = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
 
 
 @dataclasses.dataclass(frozen=True)
 class LocateConfig(ProbeConfig):
-    """``probe``'s parameters, and the side touches' [m, m/s, s]."""
+    """``probe``'s parameters, and the side touches' [m, m/s, rad, s]."""
 
     name: ClassVar[str] = "locate"
     phases: ClassVar[tuple[str, ...]] = (
         "approach",
+        "sides",
+        "datum",
         "touch",
         "rock",
         "reference",
-        "sides",
         "transfer",
         "probe",
         "centre",
@@ -67,10 +77,11 @@ class LocateConfig(ProbeConfig):
     side_gap: float = 0.008  # a side approach starts this far beyond where the drawing puts the side
     side_depth: float = 0.002  # the end this far below the face while it touches a side
     side_lift: float = 0.001  # clear of the face, this far above it, crossing the edge
-    side_backoff: float = 0.001  # back off a side by this before moving on
+    side_backoff: float = 0.003  # back off a side by this before turning or moving on
+    yaw: float = 0.25  # the second touch of a side, the hand turned this far about the vertical
     touch_speed: float = 0.015  # the approach to a side
     stall_fraction: float = 0.3  # it has met the side once the hand moves slower than this x touch_speed
-    side_time: float = 4.0  # budget of the two touches and the moves between them
+    side_time: float = 6.0  # budget of the four touches and the moves between them
     located_sigma: float = 0.0003  # the search's prior about the located hole
     located_radius: float = 0.0015  # ... and its extent
 
@@ -79,7 +90,7 @@ class LocateConfig(ProbeConfig):
 
     def check(self, scene: SceneConfig, task: TaskDisturbance) -> None:
         super().check(scene, task)
-        for name in ("side_gap", "side_depth", "touch_speed", "located_sigma", "located_radius"):
+        for name in ("side_gap", "side_depth", "side_backoff", "yaw", "touch_speed", "located_sigma"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"task.strategy.{name} must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.stall_fraction < 1:
@@ -99,13 +110,15 @@ class LocateStrategy(ProbeStrategy):
         self.sides: SideTouches | None = None
 
     def phase_table(self) -> dict[str, PhaseSpec]:
+        t, c = self.task, self.cfg
         table = super().phase_table()
-        reference = table["reference"]
-        table["reference"] = dataclasses.replace(reference, next="sides")
-        table["sides"] = PhaseSpec(
-            self._enter_sides, self._sides_done, "transfer", Timeout(self.cfg.side_time, True), tick=self._side
+        table["datum"] = table["approach"]
+        table["approach"] = PhaseSpec(
+            self._enter_side, self._motion_done, "sides", Timeout(2.0, True), tick=t.feel_free
         )
-        return {name: table[name] for name in self.cfg.phases}
+        budget = Timeout(c.side_time, True)
+        table["sides"] = PhaseSpec(self._enter_sides, self._sides_done, "datum", budget, tick=self._side)
+        return {name: table[name] for name in c.phases}
 
     def hole_prior(self) -> tuple[_Vec, float, float]:
         """The located hole with the tight prior; the observed one if a side was not found."""
@@ -113,8 +126,14 @@ class LocateStrategy(ProbeStrategy):
             return super().hole_prior()
         return self.sides.hole, self.cfg.located_sigma, self.cfg.located_radius
 
-    def _enter_sides(self, obs: Observation) -> Motion:
+    def _enter_side(self, obs: Observation) -> Motion:
+        """Up, out beyond the -x side, down below the face."""
         self.sides = SideTouches(self, obs)
+        return self.sides.path_to_first(obs)
+
+    def _enter_sides(self, obs: Observation) -> Motion:
+        assert self.sides is not None
+        self.sides.begin(obs)
         return self.sides
 
     def _side(self, obs: Observation) -> None:
@@ -124,20 +143,40 @@ class LocateStrategy(ProbeStrategy):
 
     def _sides_done(self, obs: Observation) -> str | None:
         assert self.sides is not None
-        return "located" if self.sides.done else None
+        if not self.sides.done:
+            return None
+        if self.sides.delta is not None:
+            t = self.task
+            shift = rotate_inv(self.sides.quat, np.array([*self.sides.delta, 0.0]))
+            t.revise_axis(t.up_body, obs.gripper, grasp_shift=shift)
+            self.end_known = True
+        return "located"
+
+
+def locate_end(touches: list[_Vec], yaw: float) -> _Vec:
+    """The true end's horizontal offset from the believed one at yaw 0, world (x, y) [m], from
+    four touches: the believed end's (x, y) at the -x side (yaw 0, then ``yaw``), at the -y
+    side (yaw 0, then ``yaw``). A turn by ``yaw`` about the believed end swings the true one
+    from ``d`` to ``R(yaw) d``; each side's two touches meet it at the same coordinate."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    a = np.array([[1.0 - c, s], [-s, 1.0 - c]])
+    b = np.array([touches[1][0] - touches[0][0], touches[3][1] - touches[2][1]])
+    return np.linalg.solve(a, b)
 
 
 class SideTouches:
     """The ``sides`` phase, as a motion the strategy plays and steps (module docstring).
 
-    States per side: ``move`` (a planned path to the approach's start), ``approach`` (the
-    guarded, pose-tracked approach), ``press`` (the lateral push until the hand is still), then
-    the next side, or ``leave`` (back off, up clear of the face).
+    Four legs: (-x side, yaw 0), (-x, ``yaw``), (-y, yaw 0), (-y, ``yaw``). Per leg: ``move``
+    (a planned path to the approach's start), ``approach`` (guarded, pose-tracked), ``press``
+    (the lateral push until the hand is still); then ``leave`` (back off, turn back, up clear of
+    the face).
 
     Attributes:
-        touched: the believed lower end's (x, y) [m] at each side found; ``hole``: the hole's
-            axis, as the task's belief of the end sees it (None unless both sides were found);
-            ``done``: the end is back above the face.
+        touched: the believed lower end's (x, y) [m] at each touch; ``delta``: the true end's
+            offset from the believed one at yaw 0 (world x, y) [m]; ``hole``: the hole's axis
+            (x, y) [m], as the revised belief sees it (both None unless all four were found);
+            ``done``: the end is back above the face; ``quat``: the hand's orientation at yaw 0.
     """
 
     duration = 0.0
@@ -146,112 +185,115 @@ class SideTouches:
         self.strategy, self.task, self.cfg = strategy, strategy.task, strategy.cfg
         t, c = self.task, self.cfg
         self.quat = np.asarray(t.goal.quat_world, dtype=float)
+        self._turned = quat_mul(yaw_quat(c.yaw), self.quat)
         self.touched: list[_Vec] = []
+        self.delta: _Vec | None = None
         self.hole: _Vec | None = None
         self.done = False
-        tip = t.believed_bottom(obs)
-        self._datum = tip[:2].copy()
+        # The datum's corner of the face, seen from the camera's hole: the touches' other
+        # coordinate (clear of the block's corners).
+        off = c.datum_offset / math.sqrt(2.0)
+        self._along = np.asarray(t.observed_hole, dtype=float) - off
         self._z_low = t.z_face - c.side_depth
         self._z_high = t.z_face + c.side_lift
-        # Where the drawing puts the -x and -y sides, seen from the camera's hole [m].
         sides = np.asarray(t.drawing_sides, dtype=float)
         self._side_at = (t.observed_hole[0] - sides[1], t.observed_hole[1] - sides[3])
         self._distance = (float(sides[1]), float(sides[3]))
-        self._t0 = obs.t
         self._state = "move"
+        self._t0 = obs.t
         self._still: list[_Vec] = []
         self._at_speed = False
-        self._trajectory = self._path(
-            [tip, tip + np.array([0.0, 0.0, c.side_lift]), *self._out_to(0, tip, from_datum=True)]
-        )
-        self._target = self._trajectory.sample(0.0)
+        self._trajectory: Motion | None = None
+        self._target = GripperTarget.trusted(obs.gripper.p_world, self.quat, np.zeros(3), np.zeros(3), 0.0)
 
     def sample(self, t: float) -> GripperTarget:
         return self._target  # set by step(), which keeps the episode's clock
 
     # -- paths ---------------------------------------------------------------------------------------
-    def _start_of(self, n: int) -> _Vec:
-        """Where the approach to side ``n`` (0: -x, 1: -y) starts: ``side_gap`` beyond the side
-        the drawing gives, one radius out, at the datum's other coordinate, below the face."""
-        c, t = self.cfg, self.task
-        start = np.array([*self._datum, self._z_low])
-        start[n] = self._side_at[n] - t.radius - c.side_gap
+    def _leg(self) -> tuple[int, _Vec]:
+        """The present leg's side (0: -x, 1: -y) and the hand's orientation."""
+        n = len(self.touched)
+        return n // 2, (self.quat if n % 2 == 0 else self._turned)
+
+    def _start_of(self, side: int) -> _Vec:
+        """Where the approach to ``side`` starts: ``side_gap`` beyond the side the drawing gives,
+        one radius out, at the datum corner's other coordinate, below the face."""
+        start = np.array([*self._along, self._z_low])
+        start[side] = self._side_at[side] - self.task.radius - self.cfg.side_gap
         return start
 
-    def _out_to(self, n: int, tip: _Vec, *, from_datum: bool) -> list[_Vec]:
-        """The waypoints from ``tip`` to side ``n``'s start: over the face and down beyond the
-        edge from the datum; round the corner, below the face, from the first side."""
-        start = self._start_of(n)
-        if from_datum:
-            return [np.array([*start[:2], self._z_high]), start]
-        corner = np.array([tip[0], start[1], self._z_low])
-        return [corner, start]
-
-    def _path(self, tips: list[_Vec]) -> Motion:
+    def _plan(self, tips: list[_Vec], quats: list[_Vec]) -> Motion:
         st = self.strategy
-        parts = [
-            self.task.planner.plan(st.tip_waypoint(a, self.quat), st.tip_waypoint(b, self.quat), st.quick())
-            for a, b in zip(tips, tips[1:], strict=False)
-        ]
-        self.task.goal = st.tip_waypoint(tips[-1], self.quat)
+        w = [st.tip_waypoint(tip, q) for tip, q in zip(tips, quats, strict=True)]
+        parts = [self.task.planner.plan(a, b, st.quick()) for a, b in zip(w, w[1:], strict=False)]
+        self.task.goal = w[-1]
         return TrajectorySequence(parts)
+
+    def path_to_first(self, obs: Observation) -> Motion:
+        tip = self.task.believed_bottom(obs)
+        start = self._start_of(0)
+        up = np.array([*tip[:2], max(tip[2], self._z_high)])
+        tips = [tip, up, np.array([*start[:2], up[2]]), start]
+        return self._plan(tips, [self.quat] * 4)
+
+    def begin(self, obs: Observation) -> None:
+        self._approach(obs)
 
     # -- the states ------------------------------------------------------------------------------------
     def step(self, obs: Observation) -> None:
         if self.done:
             return
-        t = obs.t
-        if self._state in ("move", "approach", "leave"):
-            assert self._trajectory is not None
-            self._target = self._trajectory.sample(t - self._t0)
-            over = t - self._t0 >= self._trajectory.duration
-            if self._state == "approach" and self._stalled(obs):
-                self._press(obs)
-            elif over and self._state == "move":
-                self._approach(obs)
-            elif over and self._state == "approach":  # no side within the gap: the camera's hole
-                self._leave(obs)
-            elif over:
-                self.done = True
-        else:
+        if self._state == "press":
             self._read(obs)
-
-    def _direction(self) -> _Vec:
-        return _X if len(self.touched) == 0 else _Y
+            return
+        assert self._trajectory is not None
+        self._target = self._trajectory.sample(obs.t - self._t0)
+        over = obs.t - self._t0 >= self._trajectory.duration
+        if self._state == "approach" and self._stalled(obs):
+            self._press(obs)
+        elif over and self._state == "move":
+            self._approach(obs)
+        elif over and self._state == "approach":  # no side where it should be: give up locating
+            self._leave(obs)
+        elif over:
+            self.done = True
 
     def _approach(self, obs: Observation) -> None:
         c, st = self.cfg, self.strategy
+        side, q = self._leg()
         tip = self.task.believed_bottom(obs)
         goal = tip.copy()
-        goal[:2] += self._direction() * 2.0 * c.side_gap
+        goal[side] += 2.0 * c.side_gap
         limits = dataclasses.replace(self.task.limits, v_lin=c.touch_speed, a_lin=c.move_accel)
-        self._trajectory = self.task.planner.plan(
-            st.tip_waypoint(tip, self.quat), st.tip_waypoint(goal, self.quat), limits
-        )
+        self._trajectory = self.task.planner.plan(st.tip_waypoint(tip, q), st.tip_waypoint(goal, q), limits)
         self._state, self._t0, self._at_speed = "approach", obs.t, False
 
     def _stalled(self, obs: Observation) -> bool:
-        """Slower than ``stall_fraction`` of the approach's speed, once it has gone faster than
-        twice that (the hand's filtered speed along the approach)."""
+        """The hand's filtered speed along the approach below ``stall_fraction`` of the
+        command's, while the command still moves at half its speed or more, once the hand has
+        followed it (a deceleration at the end is no stall)."""
         c = self.cfg
-        v = float(np.dot(self.task.hand_velocity[:2], self._direction()))
+        axis = _AXES[self._leg()[0]]
+        v = float(np.dot(self.task.hand_velocity[:2], axis))
+        v_cmd = float(np.dot(self._target.v_world[:2], axis))
         if not self._at_speed:
             self._at_speed = v > 2.0 * c.stall_fraction * c.touch_speed
             return False
-        return v < c.stall_fraction * c.touch_speed
+        return v_cmd > 0.5 * c.touch_speed and v < c.stall_fraction * v_cmd
 
     def _press(self, obs: Observation) -> None:
-        """Hold here, pushing on into the side at the wall force (the lateral axis free)."""
-        d = self._direction()
+        """Hold here, pushing on into the side at the wall force (that lateral axis free)."""
+        side, q = self._leg()
+        d = _AXES[side]
         axes = (bool(d[0]), bool(d[1]), False, False, False, False)
         force = np.array([*(self.strategy.felt(self.cfg.wall_force) * d), 0.0])
         self._target = GripperTarget.trusted(
-            obs.gripper.p_world, self.quat, np.zeros(3), np.zeros(3), 0.0, force, wrench_axes=axes
+            obs.gripper.p_world, q, np.zeros(3), np.zeros(3), 0.0, force, wrench_axes=axes
         )
         self._state, self._t0, self._still = "press", obs.t, []
 
     def _read(self, obs: Observation) -> None:
-        """Once the hand is still: where the end is."""
+        """Once the hand is still: where the believed end is; on to the next leg."""
         c, task = self.cfg, self.task
         v = float(np.hypot(*task.hand_velocity[:2]))
         limit = max(0.5 * c.stop_speed, task.contact.k_on * task.speed_noise)
@@ -261,24 +303,40 @@ class SideTouches:
         self._still.append(task.believed_bottom(obs)[:2])
         if len(self._still) * task.control_dt < 2.0 * c.stop_time:
             return
+        side, q = self._leg()
         self.touched.append(np.mean(self._still, axis=0))
-        if len(self.touched) == 2:
-            x, y = self.touched[0][0], self.touched[1][1]
-            r = task.radius
-            self.hole = np.array([x + r + self._distance[0], y + r + self._distance[1]])
+        if len(self.touched) == 4:
+            self._locate()
             self._leave(obs)
             return
         tip = task.believed_bottom(obs)
-        back = tip - np.array([*(_X * c.side_backoff), 0.0])
-        self._trajectory = self._path([tip, back, *self._out_to(1, back, from_datum=False)])
+        back = tip.copy()
+        back[side] -= c.side_backoff
+        next_side, next_q = self._leg()
+        if next_side == side:  # turn about the believed end, then approach again
+            self._trajectory = self._plan([tip, back, back], [q, q, next_q])
+        else:  # turn back, round the corner (below the face, outside the block)
+            start = self._start_of(next_side)
+            corner = back.copy()
+            corner[next_side] = start[next_side]
+            self._trajectory = self._plan([tip, back, back, corner, start], [q, q, next_q, next_q, next_q])
         self._state, self._t0 = "move", obs.t
 
-    def _leave(self, obs: Observation) -> None:
-        """Back off the side, up clear of the face."""
-        c = self.cfg
-        tip = self.task.believed_bottom(obs)
-        back = tip - np.array([*(self._direction() * c.side_backoff), 0.0])
-        up = np.array([*back[:2], self._z_high])
-        self._trajectory = self._path([tip, back, up])
-        self._state, self._t0 = "leave", obs.t
+    def _locate(self) -> None:
+        """The end against the hand, then the hole against the end (yaw 0)."""
+        delta = locate_end(self.touched, self.cfg.yaw)
+        r = self.task.radius
+        self.delta = delta
+        x = self.touched[0][0] + delta[0] + r + self._distance[0]
+        y = self.touched[2][1] + delta[1] + r + self._distance[1]
+        self.hole = np.array([x, y])
 
+    def _leave(self, obs: Observation) -> None:
+        """Back off the side, turn back, up clear of the face."""
+        side, q = self._leg() if len(self.touched) < 4 else (1, self._turned)
+        tip = self.task.believed_bottom(obs)
+        back = tip.copy()
+        back[side] -= self.cfg.side_backoff
+        up = np.array([*back[:2], self._z_high])
+        self._trajectory = self._plan([tip, back, back, up], [q, q, self.quat, self.quat])
+        self._state, self._t0 = "leave", obs.t

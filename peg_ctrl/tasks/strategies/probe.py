@@ -216,6 +216,9 @@ class ProbeStrategy(Strategy):
         self.landing: Landing | None = None
         self.search: ProbeSearch | None = None
         self.belief: HoleBelief | None = None
+        #: The believed lower end is where the peg's end is (found by touch), not only where the
+        #: nominal grasp puts it: the tilt calibration then turns the axis about the end.
+        self.end_known = False
 
     def phase_table(self) -> dict[str, PhaseSpec]:
         c, t = self.cfg, self.task
@@ -323,7 +326,9 @@ class ProbeStrategy(Strategy):
         t = self.task
         assert self.rock is not None
         if self.rock.tilt is not None:
-            t.revise_axis(self.rock.axis_body, obs.gripper)
+            # An end located by touch stays where it was found: the grasp point moves instead.
+            shift = t.grip_length * (self.rock.axis_body - t.up_body) if self.end_known else None
+            t.revise_axis(self.rock.axis_body, obs.gripper, grasp_shift=shift)
         q = self.quat_upright = upright(t.up_body, self.rock.q0)
         # Up clear of the face (by as much as the turn can lower the end's rim), turn upright,
         # down to just above the face.
@@ -500,7 +505,8 @@ class RockCalibration:
         centre [m]."""
         t = self.task
         up = _turned(t.up_body, _PAD_NORMAL, theta)
-        offset = rotate(q, t.grip_length * (t.up_body - up))
+        # An end located by touch is where the task believes it, whatever the tilt.
+        offset = np.zeros(3) if self.strategy.end_known else rotate(q, t.grip_length * (t.up_body - up))
         a = rotate(q, up)
         return offset, t.radius * math.sqrt(max(0.0, 1.0 - a[2] * a[2]))
 
