@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
 from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget
 from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownComponent
@@ -264,6 +265,9 @@ class ControllerConfig:
     VECTORS: ClassVar[tuple[str, ...]] = ()  # 3-vector fields of any sign (points, offsets) [m]
     NON_NEGATIVE: ClassVar[tuple[str, ...]] = ()  # number fields that may be 0
     control_dt: float = 0.001  # control period [s], a whole multiple of the physics timestep
+    # A first-order low-pass on the sensed velocities before the control law [Hz]; 0: none. A
+    # robot's velocities are differences of encoder positions: noisy (docs/sensing.md).
+    velocity_filter_hz: float = 0.0
 
     def __post_init__(self) -> None:
         numeric = []
@@ -271,7 +275,7 @@ class ControllerConfig:
             value = getattr(self, f.name)
             if value is None or isinstance(value, (bool, str, ControllerConfig)) or f.name in self.VECTORS:
                 continue
-            if f.name in self.NON_NEGATIVE:
+            if f.name in self.NON_NEGATIVE or f.name == "velocity_filter_hz":
                 if not (_is_number(value) and math.isfinite(value) and value >= 0):
                     raise InvalidField(self.name, f.name, f"must be finite and >= 0, got {value!r}")
                 continue
@@ -384,11 +388,27 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
         self._slide_lim = tuple(float(v) for v in self._act.slide_limit)
         self._ball_lim = tuple(float(v) for v in self._act.ball_limit)
         self._jaw_cache = (math.nan, 0.0)  # (separation [m], byte): targets hold it for long
+        hz = config.velocity_filter_hz
+        self._v_alpha = 1.0 - math.exp(-2.0 * math.pi * hz * config.control_dt) if hz > 0 else 0.0
+        self._v_filtered: NDArray[np.float64] | None = None
 
     def reset(self, state: ControlState) -> None:
         """Start an episode from ``state``: clears the controller's memory."""
         self._jaw_cache = (math.nan, 0.0)
-        self._reset(state)
+        self._v_filtered = None
+        self._reset(self._filtered(state))
+
+    def _filtered(self, state: ControlState) -> ControlState:
+        """``state`` with its velocities through the ``velocity_filter_hz`` low-pass (as is
+        without one)."""
+        if not self._v_alpha:
+            return state
+        v = np.concatenate([state.v_world, state.omega_body])
+        if self._v_filtered is None:
+            self._v_filtered = v
+        else:
+            self._v_filtered += self._v_alpha * (v - self._v_filtered)
+        return state._replace(v_world=self._v_filtered[:3].copy(), omega_body=self._v_filtered[3:].copy())
 
     def _reset(self, state: ControlState) -> None:
         """Clear the control law's own memory (filters, integrators, warm starts)."""
@@ -413,7 +433,7 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
         """
         t0 = time.perf_counter()
         _check_pose(target)
-        effort = self.control_law(state, target)
+        effort = self.control_law(self._filtered(state), target)
         force, torque = effort.force_world, effort.torque_body
         jaw_sep = float(target.jaw_sep_m)
         if jaw_sep != self._jaw_cache[0]:

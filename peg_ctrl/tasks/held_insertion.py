@@ -92,7 +92,7 @@ _DISTURBANCES = (
 _TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
 _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 _SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
-_SPEED_HZ = 15.0  # the sensed hand velocity's low-pass (encoder velocities are differences) [Hz]
+_SPEED_HZ = 5.0  # the sensed hand velocity's low-pass (encoder velocities are differences) [Hz]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -45,7 +45,7 @@ def test_a_linked_axis_is_one_axis_of_tuples() -> None:
     size = sweep_size(load_experiment(CONFIGS / "contact_real.yaml"))
     (sensor,) = [a for a in size.axes if a.name == "sensor"]
     assert sensor.keys == ("domain.ft_sensor", "task.position_noise")
-    assert sensor.levels[0] == ("ideal", 0.0)
+    assert sensor.levels[0] == ("wrist", 0.0005)
     assert size.cells == 2 * 2 * 2 * len(sensor.levels)
 
 
@@ -75,9 +75,9 @@ def test_the_estimate_of_a_committed_sweep_is_its_measured_time() -> None:
 def test_another_experiment_gets_the_range_of_the_measured_runs() -> None:
     exp = load_experiment(CONFIGS / "contact_real.yaml")
     est = estimate(sweep_size(exp), workers=2, cores=2)
-    pd = next(p for p in est.parts if p.controller == "pd")
-    assert pd.sources == ("contact", "contact_hard")
-    assert pd.wall_per_sim[0] < pd.wall_per_sim[1]
+    impedance = next(p for p in est.parts if p.controller == "impedance")
+    assert impedance.sources == ("contact", "contact_hard")
+    assert impedance.wall_per_sim[0] < impedance.wall_per_sim[1]
     assert est.low_s < est.high_s < est.worst_s
 
 

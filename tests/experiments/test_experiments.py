@@ -332,7 +332,8 @@ def test_a_bad_linked_axis_is_named(axis: dict[str, object], message: str) -> No
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: unknown strategy 'poke'; known: align, force, probe, spiral, straight, tilt",
+            "strategies[0]: unknown strategy 'poke'; known: align, force, locate, probe, spiral, straight, "
+            "tilt",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",

@@ -74,14 +74,19 @@ class LocateConfig(ProbeConfig):
         "insert",
         "hold",
     )
-    side_gap: float = 0.008  # a side approach starts this far beyond where the drawing puts the side
+    datum_offset: float = 0.032  # probe's, clear of the mouth for FORGE's 3 mm in the hand and 1 mm camera
+    insert_speed: float = (
+        0.03  # probe's descent, slower: at 0.08 m/s it taps the bore at ~50 N (friction 0.9)
+    )
+    side_gap: float = 0.008  # the first approach starts this far beyond where the drawing puts the side
+    camera_gap: float = 0.004  # ... the second side's, this far beyond it, the end's offset across known
     side_depth: float = 0.002  # the end this far below the face while it touches a side
     side_lift: float = 0.001  # clear of the face, this far above it, crossing the edge
     side_backoff: float = 0.003  # back off a side by this before turning or moving on
     yaw: float = 0.25  # the second touch of a side, the hand turned this far about the vertical
-    touch_speed: float = 0.015  # the approach to a side
+    touch_speed: float = 0.005  # the approach to a side: its impact is ~8 N at this, ~10 N at 0.01
     stall_fraction: float = 0.3  # it has met the side once the hand moves slower than this x touch_speed
-    side_time: float = 6.0  # budget of the four touches and the moves between them
+    side_time: float = 8.0  # budget of the four touches and the moves between them
     located_sigma: float = 0.0003  # the search's prior about the located hole
     located_radius: float = 0.0015  # ... and its extent
 
@@ -90,7 +95,16 @@ class LocateConfig(ProbeConfig):
 
     def check(self, scene: SceneConfig, task: TaskDisturbance) -> None:
         super().check(scene, task)
-        for name in ("side_gap", "side_depth", "side_backoff", "yaw", "touch_speed", "located_sigma"):
+        positive = (
+            "side_gap",
+            "camera_gap",
+            "side_depth",
+            "side_backoff",
+            "yaw",
+            "touch_speed",
+            "located_sigma",
+        )
+        for name in positive:
             if getattr(self, name) <= 0:
                 raise ConfigError(f"task.strategy.{name} must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.stall_fraction < 1:
@@ -217,9 +231,16 @@ class SideTouches:
 
     def _start_of(self, side: int) -> _Vec:
         """Where the approach to ``side`` starts: ``side_gap`` beyond the side the drawing gives,
-        one radius out, at the datum corner's other coordinate, below the face."""
+        one radius out, at the datum corner's other coordinate, below the face. The -y side's,
+        once the -x side's two touches have told the end's offset along y (a turn about z moves
+        the end across the approach mostly): ``camera_gap`` beyond where the end will meet it."""
+        c = self.cfg
         start = np.array([*self._along, self._z_low])
-        start[side] = self._side_at[side] - self.task.radius - self.cfg.side_gap
+        start[side] = self._side_at[side] - self.task.radius - c.side_gap
+        if side == 1 and len(self.touched) >= 2:
+            # (1 - cos yaw) d_x + sin(yaw) d_y: d_x's share is within a millimetre of d_y
+            d_y = (self.touched[1][0] - self.touched[0][0]) / math.sin(c.yaw)
+            start[1] = self._side_at[1] - d_y - self.task.radius - c.camera_gap
         return start
 
     def _plan(self, tips: list[_Vec], quats: list[_Vec]) -> Motion:
@@ -263,7 +284,7 @@ class SideTouches:
         side, q = self._leg()
         tip = self.task.believed_bottom(obs)
         goal = tip.copy()
-        goal[side] += 2.0 * c.side_gap
+        goal[side] += 2.0 * (c.camera_gap if side == 1 else c.side_gap)
         limits = dataclasses.replace(self.task.limits, v_lin=c.touch_speed, a_lin=c.move_accel)
         self._trajectory = self.task.planner.plan(st.tip_waypoint(tip, q), st.tip_waypoint(goal, q), limits)
         self._state, self._t0, self._at_speed = "approach", obs.t, False

@@ -484,9 +484,12 @@ class RockCalibration:
     """
 
     duration = 0.0
+    #: The believed lower end is the true one (found by touch): the fit turns the axis about it.
+    end_known = False
 
     def __init__(self, strategy: ProbeStrategy, touch: Landing, obs: Observation) -> None:
         self.strategy, self.task, self.cfg = strategy, strategy.task, strategy.cfg
+        self.end_known = strategy.end_known
         self.q0 = touch.quat_world.copy()
         self.landings = [touch]
         self.tilt: float | None = None
@@ -506,7 +509,7 @@ class RockCalibration:
         t = self.task
         up = _turned(t.up_body, _PAD_NORMAL, theta)
         # An end located by touch is where the task believes it, whatever the tilt.
-        offset = np.zeros(3) if self.strategy.end_known else rotate(q, t.grip_length * (t.up_body - up))
+        offset = np.zeros(3) if self.end_known else rotate(q, t.grip_length * (t.up_body - up))
         a = rotate(q, up)
         return offset, t.radius * math.sqrt(max(0.0, 1.0 - a[2] * a[2]))
 
