@@ -291,3 +291,44 @@ def test_observing_the_task_s_belief_is_declared_with_the_method_that_does_it(mo
         class Secret(Constant):
             def observe_belief(self, belief: object) -> None:
                 pass
+
+
+class Recording(ControllerBase[ConstantConfig]):
+    """Records the state its control law is handed."""
+
+    name = "recording"
+
+    def __init__(self, model: mujoco.MjModel, config: ConstantConfig) -> None:
+        super().__init__(model, config)
+        self.seen: list[ControlState] = []
+
+    def control_law(self, state: ControlState, target: GripperTarget) -> Effort:
+        self.seen.append(state)
+        return Effort((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def test_the_velocity_filter_low_passes_the_sensed_velocities(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """velocity_filter_hz: a first-order low-pass on v_world and omega_body, started at the
+    reset's; the pose untouched. 0 (the default): the state as sensed, the very object."""
+    dt, hz = 0.001, 30.0
+    filtered = Recording(model, ConstantConfig(control_dt=dt, velocity_filter_hz=hz))
+    plain = Recording(model, ConstantConfig(control_dt=dt))
+    for c in (filtered, plain):
+        c.reset(home_state)
+    step = home_state._replace(v_world=np.array([0.01, 0.0, -0.02]), omega_body=np.array([0.0, 0.3, 0.0]))
+    tgt = target(home_state.p_world)
+    for _ in range(10):
+        filtered.compute(step, tgt)
+        plain.compute(step, tgt)
+    assert all(s is step for s in plain.seen)
+    alpha = 1.0 - math.exp(-2.0 * math.pi * hz * dt)
+    expected = 1.0 - (1.0 - alpha) ** np.arange(1, 11)  # the share of the step after n periods
+    np.testing.assert_allclose([s.v_world[0] / 0.01 for s in filtered.seen], expected, rtol=1e-12)
+    np.testing.assert_allclose([s.omega_body[1] / 0.3 for s in filtered.seen], expected, rtol=1e-12)
+    assert all(np.array_equal(s.p_world, step.p_world) for s in filtered.seen)
+    with pytest.raises(
+        ConfigError, match=r"^constant\.velocity_filter_hz: must be finite and >= 0, got -1\.0$"
+    ):
+        ConstantConfig(velocity_filter_hz=-1.0)

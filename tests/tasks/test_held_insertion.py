@@ -330,3 +330,17 @@ def test_align_seats_a_tilted_peg_at_high_friction_within_the_budget() -> None:
     assert peak <= 10.0
     phases = [r.phase for r in loop.task.records]
     assert phases[:8] == ["start", "settle", "approach", "touch", "align", "transfer", "search", "insert"]
+
+
+def test_the_speed_sensing_noise_is_measured_through_the_velocity_filter() -> None:
+    """1 mm/s of white noise on the sensed velocity, read at 1 kHz: the task's stop and seated
+    detections see it through a 5 Hz low-pass, which passes sqrt(alpha / (2 - alpha)) of it."""
+    cfg = config("seed=3", "domain.velocity_noise=0.001", "task.lateral_error=0.0", "controller.name=pd")
+    loop = build_loop(cfg)
+    loop.reset(np.random.default_rng(3))
+    task: Any = loop.task
+    while task.phase == "settle":
+        loop.step()
+    alpha = 1.0 - math.exp(-2.0 * math.pi * 5.0 * task.control_dt)
+    assert task.speed_noise == pytest.approx(0.001 * math.sqrt(alpha / (2.0 - alpha)), rel=0.5)
+    assert task.speed_noise < 0.25 * 0.001

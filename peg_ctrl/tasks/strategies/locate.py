@@ -48,7 +48,7 @@ from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.strategies.base import HeldInsertion, TaskDisturbance
-from peg_ctrl.tasks.strategies.probe import _WALL_SETTLE, ProbeConfig, ProbeStrategy
+from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy, WallPush
 
 __all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_end"]
 
@@ -61,23 +61,10 @@ class LocateConfig(ProbeConfig):
     """``probe``'s parameters, and the side touches' [m, m/s, rad, s]."""
 
     name: ClassVar[str] = "locate"
-    phases: ClassVar[tuple[str, ...]] = (
-        "approach",
-        "sides",
-        "datum",
-        "touch",
-        "rock",
-        "reference",
-        "transfer",
-        "probe",
-        "centre",
-        "insert",
-        "hold",
-    )
-    datum_offset: float = 0.032  # probe's, clear of the mouth for FORGE's 3 mm in the hand and 1 mm camera
-    insert_speed: float = (
-        0.03  # probe's descent, slower: at 0.08 m/s it taps the bore at ~50 N (friction 0.9)
-    )
+    # probe's, the side touches first: its approach to the datum is ``datum`` here.
+    phases: ClassVar[tuple[str, ...]] = ("approach", "sides", "datum", *ProbeConfig.phases[1:])
+    datum_offset: float = 0.032  # probe's, clear of the mouth at 3 mm in the hand, 1 mm of camera
+    insert_speed: float = 0.03  # probe's descent, slower: 0.08 m/s taps the bore at ~50 N
     side_gap: float = 0.008  # the first approach starts this far beyond where the drawing puts the side
     camera_gap: float = 0.004  # ... the second side's, this far beyond it, the end's offset across known
     side_depth: float = 0.002  # the end this far below the face while it touches a side
@@ -215,7 +202,7 @@ class SideTouches:
         self._distance = (float(sides[1]), float(sides[3]))
         self._state = "move"
         self._t0 = obs.t
-        self._still: list[_Vec] = []
+        self._wall: WallPush | None = None
         self._at_speed = False
         self._trajectory: Motion | None = None
         self._target = GripperTarget.trusted(obs.gripper.p_world, self.quat, np.zeros(3), np.zeros(3), 0.0)
@@ -305,27 +292,19 @@ class SideTouches:
     def _press(self, obs: Observation) -> None:
         """Hold here, pushing on into the side at the wall force (that lateral axis free)."""
         side, q = self._leg()
-        d = _AXES[side]
-        axes = (bool(d[0]), bool(d[1]), False, False, False, False)
-        force = np.array([*(self.strategy.felt(self.cfg.wall_force) * d), 0.0])
-        self._target = GripperTarget.trusted(
-            obs.gripper.p_world, q, np.zeros(3), np.zeros(3), 0.0, force, wrench_axes=axes
-        )
-        self._state, self._t0, self._still = "press", obs.t, []
+        self._wall = WallPush(self.strategy, obs, obs.gripper.p_world, q, _AXES[side])
+        self._target = self._wall.target
+        self._state, self._t0 = "press", obs.t
 
     def _read(self, obs: Observation) -> None:
         """Once the hand is still: where the believed end is; on to the next leg."""
         c, task = self.cfg, self.task
-        v = float(np.hypot(*task.hand_velocity[:2]))
-        limit = max(0.5 * c.stop_speed, task.contact.k_on * task.speed_noise)
-        if v >= limit or obs.t - self._t0 < _WALL_SETTLE:
-            self._still = []
-            return
-        self._still.append(task.believed_bottom(obs)[:2])
-        if len(self._still) * task.control_dt < 2.0 * c.stop_time:
+        assert self._wall is not None
+        wall = self._wall.update(obs)
+        if wall is None:
             return
         side, q = self._leg()
-        self.touched.append(np.mean(self._still, axis=0))
+        self.touched.append(wall)
         if len(self.touched) == 4:
             self._locate()
             self._leave(obs)

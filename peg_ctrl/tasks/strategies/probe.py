@@ -64,7 +64,7 @@ from peg_ctrl.tasks.phases import DONE, Motion, PhaseSpec, Timeout, TrajectorySe
 from peg_ctrl.tasks.strategies.base import HeldInsertion, Strategy, StrategyConfig, TaskDisturbance, never
 from peg_ctrl.tasks.strategies.motions import Guided, Hold, about, down
 
-__all__ = ["ProbeConfig", "ProbeStrategy", "ProbeSearch", "Landing"]
+__all__ = ["ProbeConfig", "ProbeStrategy", "ProbeSearch", "Landing", "WallPush"]
 
 _Vec = np.ndarray
 PRESS_AXES = (False, False, True, False, False, False)  # press along z, the pose held otherwise
@@ -632,7 +632,6 @@ class Centring:
         self.centre: _Vec | None = None
         self._start = obs.gripper.p_world.copy()
         self._p: _Vec = self._start.copy()  # the pushes' held position
-        self._still: list[_Vec] = []
         self._push(obs)
 
     def sample(self, t: float) -> GripperTarget:
@@ -642,37 +641,58 @@ class Centring:
         """Along the next direction, the other lateral axis held (at the middle of the x walls,
         once found: a chord through the axis)."""
         n = len(self.walls)
-        d = self._DIRECTIONS[n]
         p = obs.gripper.p_world.copy()
         p[2] = self._start[2]
         if n == 2:  # the x walls found: over to the middle between them
             p[0] += 0.5 * (self.walls[0][0] + self.walls[1][0]) - self.task.believed_bottom(obs)[0]
         self._p = p if n != 3 else self._p
-        axes = (bool(d[0]), bool(d[1]), False, False, False, False)
-        force = np.array([*(self.strategy.felt(self.cfg.wall_force) * d), 0.0])
-        self._target = GripperTarget.trusted(
-            self._p, self.strategy.quat_upright, np.zeros(3), np.zeros(3), 0.0, force, wrench_axes=axes
-        )
-        self._t0, self._still = obs.t, []
+        self._wall = WallPush(self.strategy, obs, self._p, self.strategy.quat_upright, self._DIRECTIONS[n])
+        self._target = self._wall.target
 
     def step(self, obs: Observation) -> None:
         if self.centre is not None:
             return
-        c, task = self.cfg, self.task
-        v = float(np.hypot(*task.hand_velocity[:2]))
-        limit = max(0.5 * c.stop_speed, task.contact.k_on * task.speed_noise)
-        if v >= limit or obs.t - self._t0 < _WALL_SETTLE:
-            self._still = []
+        wall = self._wall.update(obs)
+        if wall is None:
             return
-        self._still.append(task.believed_bottom(obs)[:2])
-        if len(self._still) * task.control_dt < 2.0 * c.stop_time:
-            return
-        self.walls.append(np.mean(self._still, axis=0))
+        self.walls.append(wall)
         if len(self.walls) < len(self._DIRECTIONS):
             self._push(obs)
             return
         w = self.walls
         self.centre = np.array([0.5 * (w[0][0] + w[1][0]), 0.5 * (w[2][1] + w[3][1])])
+
+
+class WallPush:
+    """The hand at ``p_world`` and ``quat``, pushing along the horizontal unit ``direction``
+    (x or y) at the wall force (that lateral axis free, the rest held): a wall is found once the
+    hand has been still (its filtered speed within the stop speed's half, or k sigma of the speed
+    sensing's noise) for twice the landings' stop time, after ``_WALL_SETTLE``. :meth:`update`
+    then gives the believed lower end's mean (x, y) [m] over that stillness."""
+
+    def __init__(
+        self, strategy: ProbeStrategy, obs: Observation, p_world: _Vec, quat: _Vec, direction: _Vec
+    ) -> None:
+        self.task, self.cfg = strategy.task, strategy.cfg
+        axes = (bool(direction[0]), bool(direction[1]), False, False, False, False)
+        force = np.array([*(strategy.felt(self.cfg.wall_force) * direction), 0.0])
+        self.target = GripperTarget.trusted(
+            p_world, quat, np.zeros(3), np.zeros(3), 0.0, force, wrench_axes=axes
+        )
+        self._t0 = obs.t
+        self._still: list[_Vec] = []
+
+    def update(self, obs: Observation) -> _Vec | None:
+        c, task = self.cfg, self.task
+        v = float(np.hypot(*task.hand_velocity[:2]))
+        limit = max(0.5 * c.stop_speed, task.contact.k_on * task.speed_noise)
+        if v >= limit or obs.t - self._t0 < _WALL_SETTLE:
+            self._still = []
+            return None
+        self._still.append(task.believed_bottom(obs)[:2])
+        if len(self._still) * task.control_dt < 2.0 * c.stop_time:
+            return None
+        return np.mean(self._still, axis=0)
 
 
 class PressedCircle:

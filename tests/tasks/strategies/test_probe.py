@@ -202,22 +202,31 @@ def _wxyz(r: Rotation) -> NDArray[np.float64]:
     return np.array([w, x, y, z])
 
 
-def _calibration(tilt: float, z_face: float, noise: NDArray[np.float64]) -> RockCalibration:
+def _calibration(
+    tilt: float, z_face: float, noise: NDArray[np.float64], *, offset: float = 0.0, end_known: bool = False
+) -> RockCalibration:
     """The calibration after its three landings, the touch and at +/- ``rock_angle`` about the
-    pads' normal (gripper x), for a peg tilted by ``tilt`` [rad] about it in the hand: each hand
-    pose put the lowest point of the peg's end on the face at ``z_face`` [m] (plus ``noise`` (3,))."""
+    pads' normal (gripper x), for a peg tilted by ``tilt`` [rad] about it in the hand and held
+    ``offset`` [m] along the pads' plane, across its axis, from where the task believes: each hand
+    pose put the lowest point of the peg's end on the face at ``z_face`` [m] (plus ``noise`` (3,)).
+    ``end_known``: the task's belief of the end is the true end (located by touch)."""
     up_true = Rotation.from_rotvec(tilt * np.array([1.0, 0.0, 0.0])).apply(UP_BODY)
+    across = np.cross(UP_BODY, [1.0, 0.0, 0.0])
+    grasp_true = GRASP_BODY + offset * across
     x_world = _Q0.apply([1.0, 0.0, 0.0])
     landings = []
     for k, angle in enumerate((0.0, CFG.rock_angle, -CFG.rock_angle)):
         r = Rotation.from_rotvec(angle * x_world) * _Q0
-        tip = r.apply(GRASP_BODY - GRIP_LENGTH * up_true)  # the true lower end's centre, from the pinch
+        tip = r.apply(grasp_true - GRIP_LENGTH * up_true)  # the true lower end's centre, from the pinch
         axis = r.apply(up_true)
         lowest = RADIUS * math.sqrt(1.0 - axis[2] ** 2)  # the end's rim below its centre
         p = np.array([0.17 + 0.001 * k, -0.02, z_face + noise[k] - tip[2] + lowest])
         landings.append(SimpleNamespace(p_world=p, quat_world=_wxyz(r)))
     cal = RockCalibration.__new__(RockCalibration)  # the fit alone: no strategy, no motion
-    cal.task = SimpleNamespace(up_body=UP_BODY, grasp_body=GRASP_BODY, grip_length=GRIP_LENGTH, radius=RADIUS)
+    # Located by touch, the believed end is the true one (on the believed, upright axis).
+    grasp = grasp_true - GRIP_LENGTH * up_true + GRIP_LENGTH * UP_BODY if end_known else GRASP_BODY
+    cal.task = SimpleNamespace(up_body=UP_BODY, grasp_body=grasp, grip_length=GRIP_LENGTH, radius=RADIUS)
+    cal.end_known = end_known
     cal.landings = landings
     cal._thetas = np.linspace(-CFG.max_tilt, CFG.max_tilt, 321)  # as __init__ makes it
     return cal
@@ -247,3 +256,20 @@ def test_the_rock_fit_tolerates_micrometre_noise_on_the_heights() -> None:
     cal = _calibration(math.radians(2.0), 0.05, np.array([2e-6, -2e-6, 1e-6]))
     cal._fit()
     assert cal.tilt is not None and math.degrees(cal.tilt) == pytest.approx(2.0, abs=0.05)
+
+
+@pytest.mark.parametrize("tilt_deg", [2.0, -2.0, 0.0])
+def test_an_offset_in_the_hand_reads_as_tilt_unless_the_end_is_known(tilt_deg: float) -> None:
+    """3 mm along the pads' plane: turning the hand about the pads' normal lifts or lowers the end
+    by 3 mm x sin(angle), as a tilt would; the fit is off by more than half a degree (a peg 0.5
+    degrees off its bore wedges within 12 mm at 0.05 mm of clearance). With
+    the end located first (its believed position the true one), the rim alone fixes the tilt."""
+    tilt = math.radians(tilt_deg)
+    for offset in (0.003, -0.003):
+        blind = _calibration(tilt, 0.05, np.zeros(3), offset=offset)
+        blind._fit()
+        assert blind.tilt is not None and abs(math.degrees(blind.tilt) - tilt_deg) > 0.5
+        known = _calibration(tilt, 0.05, np.zeros(3), offset=offset, end_known=True)
+        known._fit()
+        assert known.tilt is not None and math.degrees(known.tilt) == pytest.approx(tilt_deg, abs=0.05)
+        assert known.z_face == pytest.approx(0.05, abs=5e-6)

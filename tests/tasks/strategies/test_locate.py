@@ -1,0 +1,110 @@
+"""The locate strategy: the end's offset from two touches per side with the hand turned, its
+settings checked, and a held insertion at FORGE's difficulty run in the physics."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from peg_ctrl.config import apply_overrides
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.planners.base import Waypoint
+from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
+from peg_ctrl.tasks.strategies.locate import LocateConfig, locate_end
+
+
+@pytest.mark.parametrize("delta", [(0.003, -0.002), (-0.0054, 0.0), (0.0, 0.0)])
+@pytest.mark.parametrize("yaw", [0.25, 0.6])
+def test_four_touches_give_the_end_against_the_believed_one(delta: tuple[float, float], yaw: float) -> None:
+    """The true end is ``delta`` from the believed one; a turn by ``yaw`` about the believed end
+    swings it to R(yaw) delta. A side is met where the true end reaches it, so the believed end
+    stops short of the side by the true end's offset along the approach."""
+    d = np.array(delta)
+    c, s = math.cos(yaw), math.sin(yaw)
+    turned = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+    side_x, side_y = 0.15, -0.05  # where the true end meets the -x and the -y side [m]
+    touches = [
+        np.array([side_x - d[0], -0.02]),
+        np.array([side_x - turned[0], -0.021]),
+        np.array([0.17, side_y - d[1]]),
+        np.array([0.171, side_y - turned[1]]),
+    ]
+    np.testing.assert_allclose(locate_end(touches, yaw), d, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("yaw", 0.0, "task.strategy.yaw must be > 0, got 0.0"),
+        ("touch_speed", -0.01, "task.strategy.touch_speed must be > 0, got -0.01"),
+        ("stall_fraction", 1.0, "task.strategy.stall_fraction must be in (0, 1), got 1.0"),
+        (
+            "side_depth",
+            0.03,
+            "task.strategy.side_depth must be below half the block's height (0.025 m), got 0.03",
+        ),
+    ],
+)
+def test_bad_settings_are_named(field: str, value: float, message: str) -> None:
+    data = apply_overrides(
+        {"task": {"name": "held_insertion", "strategy": {"name": "locate", field: value}}}, []
+    )
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        episode_config_from_mapping(data)
+    assert LocateConfig().insert_speed == 0.03  # slower than probe's
+
+
+@pytest.mark.slow  # one held insertion, ~10 s of simulation
+def test_locate_finds_the_end_and_seats_at_forges_difficulty() -> None:
+    """3 mm in the hand, 2 degrees of tilt, the hole observed 1 mm off (sigma), FORGE's 1 N of
+    force noise, friction 0.9, the hand's pose and velocity noisy: the end is located to 0.3 mm
+    in the hand, the tilt to 0.2 degrees, and the peg seats."""
+    mpc = {
+        "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
+        "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
+        "control_dt": 0.001, "contact_dt": 0.002, "mpc_dt": 0.005, "q_vel": 100.0,
+        "max_contact_speed": 0.002, "accel_filter_hz": 30.0, "moment_filter_hz": 3.5,
+        "reversal_backoff": 2.0, "sensor_latency": 0.015, "velocity_filter_hz": 30.0,
+    }  # fmt: skip
+    cfg = episode_config_from_mapping(
+        {
+            "seed": 7,
+            "controller": mpc,
+            "task": {
+                "name": "held_insertion",
+                "strategy": "locate",
+                "lateral_error": 0.003,
+                "tilt_error": 0.0349066,
+                "position_noise": 0.001,
+                "drawing_tolerance": 0.00015,
+            },
+            "domain": {"ft_sensor": "forge", "position_noise": 3e-5, "velocity_noise": 0.001},
+            "scene": {"assets": {"chamfer": 0.001}, "friction": 0.9},
+            "physics": {"profile": "precision"},
+        }
+    )
+    loop = build_loop(cfg)
+    loop.reset(np.random.default_rng(cfg.seed))
+    task = loop.task
+
+    def end_error() -> np.ndarray:  # the true end from the believed one [m]
+        s = loop.state()
+        return loop.peg.bottom_world - task.believed_bottom_of(Waypoint.of(s.p_world, s.quat_world, 0.0))  # type: ignore[attr-defined]
+
+    assert float(np.linalg.norm(end_error())) > 0.003
+    located = tilt = None
+    while True:
+        ev = loop.step()
+        if located is None and task.phase == "datum":  # type: ignore[attr-defined]
+            located = float(np.linalg.norm(end_error()))
+        if tilt is None and task.phase == "reference":  # type: ignore[attr-defined]
+            tilt = task.strategy.rock.tilt  # type: ignore[attr-defined]
+            in_hand = task.disturbance.tilt_sign * cfg.task.tilt_error  # type: ignore[attr-defined]
+        if ev.done:
+            break
+    assert ev.success, ev.detail
+    assert located is not None and located < 0.0003
+    assert tilt is not None and abs(math.degrees(tilt - in_hand)) < 0.2
