@@ -424,7 +424,7 @@ def _identity(cfg: Any) -> Any:
             default = dataclasses.MISSING
         if default is dataclasses.MISSING or _json(value) != _json(default):
             out[f.name] = _identity(value)
-    return {"name": cfg.name, **out} if is_selectable(type(cfg)) else out
+    return {"name": cfg.name, **out} if is_selectable(type(cfg)) else out  # type: ignore[attr-defined]
 
 
 def _json(value: Any) -> str:
