@@ -302,7 +302,11 @@ RUNS = {
     ),
     "excessive_tilt": (["--set", "success.max_tilt=1e-9"], 1, "excessive_tilt"),
     # The held-insertion end states, in the precision physics (about 7-9 s each).
-    "wedged": (_held("pd", "spiral", "lateral_error=0.0015", "tilt_error=0.02618"), 1, "wedged"),
+    "wedged": (
+        _held("pd", "spiral", "lateral_error=0.0015", "tilt_error=0.02618") + ["--seed", "1"],
+        1,
+        "wedged",
+    ),
     "missed": (_held("impedance", "force", "lateral_error=0.004", chamfer=0.0), 1, "missed"),
     "jammed": (  # too little force to push the peg down the bore: it stops in it
         _held("impedance", "force", "lateral_error=0.0", "strategy.insert_force=0.2", friction=True),
