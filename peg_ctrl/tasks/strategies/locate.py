@@ -11,7 +11,8 @@ error, from the pose alone (a touch's stop is read from the hand, not from a for
 
 Knowing the end matters for the tilt calibration: ``probe``'s landings turn the hand about the
 pads' normal, and an end off the believed one by ``e`` across the pads rises or falls by
-``e sin(angle)`` as it turns, as a tilt of ``e / grip_length`` would (3 mm: 2.5 degrees).
+``e sin(angle)`` as it turns, as a tilt would: 3 mm puts the fit more than half a degree off
+(``tests/tasks/strategies/test_probe.py``), and half a degree wedges a peg in a 0.05 mm bore.
 
 Phases:
 
