@@ -27,6 +27,7 @@ from peg_ctrl.errors import CommandError, ConfigError, DivergenceError, UnknownC
 from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.jaw import JawCalibration, load_default
 from peg_ctrl.sim.scene import BALL_ACTUATORS, JAW_ACTUATOR, SLIDE_ACTUATORS
+from peg_ctrl.sim.sensing import lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 from peg_ctrl.timing import control_decimation
 
@@ -263,7 +264,8 @@ class ControllerConfig:
     name: ClassVar[str]
     GAINS: ClassVar[tuple[str, ...]] = ()
     VECTORS: ClassVar[tuple[str, ...]] = ()  # 3-vector fields of any sign (points, offsets) [m]
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ()  # number fields that may be 0
+    # Number fields that may be 0; a subclass's add to its bases' (collected along the MRO).
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("velocity_filter_hz",)
     control_dt: float = 0.001  # control period [s], a whole multiple of the physics timestep
     # A first-order low-pass on the sensed velocities before the control law [Hz]; 0: none. A
     # robot's velocities are differences of encoder positions: noisy (docs/sensing.md).
@@ -271,11 +273,12 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         numeric = []
+        non_negative = {name for cls in type(self).__mro__ for name in vars(cls).get("NON_NEGATIVE", ())}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if value is None or isinstance(value, (bool, str, ControllerConfig)) or f.name in self.VECTORS:
                 continue
-            if f.name in self.NON_NEGATIVE or f.name == "velocity_filter_hz":
+            if f.name in non_negative:
                 if not (_is_number(value) and math.isfinite(value) and value >= 0):
                     raise InvalidField(self.name, f.name, f"must be finite and >= 0, got {value!r}")
                 continue
@@ -389,7 +392,7 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
         self._ball_lim = tuple(float(v) for v in self._act.ball_limit)
         self._jaw_cache = (math.nan, 0.0)  # (separation [m], byte): targets hold it for long
         hz = config.velocity_filter_hz
-        self._v_alpha = 1.0 - math.exp(-2.0 * math.pi * hz * config.control_dt) if hz > 0 else 0.0
+        self._v_alpha = lowpass_alpha(hz, config.control_dt) if hz > 0 else 0.0
         self._v_filtered: NDArray[np.float64] | None = None
 
     def reset(self, state: ControlState) -> None:

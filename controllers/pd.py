@@ -39,6 +39,7 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import ControllerBase, ControllerConfig, Effort
 from peg_ctrl.sim.jaw import JawCalibration
 from peg_ctrl.sim.scene import BALL_JOINT, HOME_KEY, SLIDE_JOINTS
+from peg_ctrl.sim.sensing import lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 
 __all__ = ["PDConfig", "PDController"]
@@ -94,7 +95,7 @@ class PDController(ControllerBase[PDConfig]):
         mujoco.mj_comPos(model, scratch)
         r_world = scratch.subtree_com[root] - scratch.xpos[root]
         self._com_body = scratch.xmat[root].reshape(3, 3).T @ r_world
-        self._alpha = 1.0 - math.exp(-2.0 * math.pi * self.config.omega_filter_hz * self.control_dt)
+        self._alpha = lowpass_alpha(self.config.omega_filter_hz, self.control_dt)
         # Plain floats for the scalar inner loop.
         self._b_slide = tuple(float(b) for b in self._b_slide)
         self._b_ball = tuple(float(b) for b in self._b_ball)

@@ -64,7 +64,7 @@ from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
 from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
-from peg_ctrl.sim.sensing import Detector, WristSensor
+from peg_ctrl.sim.sensing import Detector, WristSensor, lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
 from peg_ctrl.tasks.monitors import (
@@ -230,6 +230,7 @@ class HeldInsertionTask(PlannedMoves):
         self.z_face = self.block_top  # the face's height as the believed lower end senses it [m]
         self.aligned_tilt: float | None = None  # the peg's tilt in the hand a calibration found [rad]
         self._wrist: WristSensor | None = None
+        self._v_alpha = lowpass_alpha(_SPEED_HZ, control_dt)  # the hand velocity's low-pass gain
         self._belief: Belief | None = None
         self._belief_key: tuple[float, ...] = ()
         self.strategy: Strategy = config.strategy.build(self)
@@ -352,7 +353,6 @@ class HeldInsertionTask(PlannedMoves):
         self._v_samples: list[float] = []
         self._v_noise = 0.0  # standard deviation of the filtered vertical speed [m/s]
         self._v_filtered: NDArray[np.float64] | None = None
-        self._v_alpha = 1.0 - math.exp(-2.0 * math.pi * _SPEED_HZ * self.control_dt)
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
         self.aligned_tilt = None

@@ -295,7 +295,7 @@ class SideTouches:
         side, q = self._leg()
         self._wall = WallPush(self.strategy, obs, obs.gripper.p_world, q, _AXES[side])
         self._target = self._wall.target
-        self._state, self._t0 = "press", obs.t
+        self._state = "press"  # the push keeps its own clock
 
     def _read(self, obs: Observation) -> None:
         """Once the hand is still: where the believed end is; on to the next leg."""
