@@ -43,6 +43,13 @@ task's belief is (a hole 2 mm off, a peg tilted in the hand), so its wrench is c
 measured one (offset-free MPC): ``F = F_sensed + (F_model - F_model(start))``, likewise ``M``. The
 target's pose is extrapolated over the horizon at its velocity.
 
+**Planning over the belief.** When the task hands over (its belief carries ``plan_depth``: the
+``plan`` strategy), the controller stops tracking the target and plans towards the goal itself
+on hypotheses of the belief weighed by a filter, with a cost of named residual terms:
+:mod:`peg_ctrl.controllers.belief_planner`, :mod:`peg_ctrl.controllers.residuals`,
+docs/planning.md. Its fields (``hypotheses``, ``particles``, ``risk``, the priors, the filter's
+scales, ``w_<term>``) are not used while it tracks.
+
 The belief model is trusted only while it explains the present contact: where its wrench at the
 measured state differs from the sensed one by more than ``trust_force`` or ``trust_moment`` (the
 hole is not where the task thinks, the peg is tilted in the hand), its predictions would mislead,
@@ -74,7 +81,9 @@ from peg_ctrl.controllers.base import (
     check_target,
 )
 from peg_ctrl.controllers.belief_model import BeliefModelSpec, build_belief_model
+from peg_ctrl.controllers.belief_planner import RISKS, BeliefPlanner, PlannerSettings
 from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
+from peg_ctrl.controllers.residuals import TERMS
 from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.jaw import JawCalibration
 from peg_ctrl.sim.rotations import cross, quat_mul, rotate, rotate_inv
@@ -105,6 +114,20 @@ class SamplingMPCConfig(ControllerConfig):
         "w_offset",
         "tare_time",
         "seed",
+        "w_depth",
+        "w_lateral",
+        "w_sink_speed",
+        "w_side_speed",
+        "w_bore_speed",
+        "w_tilt",
+        "w_slip",
+        "w_effort",
+        "w_accel",
+        "grasp_sigma",
+        "depth_sigma",
+        "tilt_sigma",
+        "filter_moment",
+        "plan_noise_rot",
     )
     method: str = "predictive_sampling"  # predictive_sampling, mppi or cem
     control_dt: float = 0.001  # the inner loop's period [s]
@@ -137,6 +160,32 @@ class SamplingMPCConfig(ControllerConfig):
     moment_damping: float = 0.5  # ... on moment axes [N m s/rad]
     max_contact_speed: float = 0.01  # [m/s]
     max_turn_rate: float = 0.05  # [rad/s]
+    # Planning over the belief, once a task hands over (Belief.plan_depth; the ``plan`` strategy):
+    # controllers/belief_planner.py, docs/planning.md. The cost's terms and their weights
+    # (controllers/residuals.py) [1/unit^2], w_budget and the budget above being shared.
+    hypotheses: int = 4  # drawn from the belief to score every plan on; 1: the nominal model alone
+    particles: int = 64  # the belief's hypotheses, weighed by the filter
+    risk: str = "mean"  # a plan's score over its hypotheses: mean or worst
+    grasp_sigma: float = 0.002  # the prior on the end's offset in the hand along the pads' plane [m]
+    depth_sigma: float = 0.0002  # ... in height (the face's tolerance, a slip in the pads) [m]
+    tilt_sigma: float = 0.0  # ... the peg's tilt in the hand about the pads' normal [rad]
+    friction_low: float = 0.3  # the friction's range, uniform
+    friction_high: float = 0.9
+    filter_position: float = 2e-4  # the likelihood's scale on the end's move over a replan [m]
+    filter_force: float = 3.0  # ... on the contact force [N]
+    filter_moment: float = 0.0  # ... on its moment about the believed end [N m]; 0: not compared
+    plan_noise_pos: float = 3e-4  # a candidate's step per knot [m]
+    plan_noise_rot: float = 0.0  # ... in turn [rad]; 0: the plans keep the hand's orientation
+    slip_force: float = 20.0  # the force along the peg the pads hold [N]
+    w_depth: float = 1.0e3
+    w_lateral: float = 1.0e6
+    w_sink_speed: float = 7.0e3
+    w_side_speed: float = 2.0e3
+    w_bore_speed: float = 0.0
+    w_tilt: float = 1.0e2
+    w_slip: float = 10.0
+    w_effort: float = 1.0e4
+    w_accel: float = 1.0e5
     inner: ImpedanceConfig = ImpedanceConfig(
         k_pos=(3000.0, 3000.0, 3000.0), k_rot=(30.0, 30.0, 30.0), damping_compensation=0.9
     )  # executes the plan; its compliance_center is the believed tip, its control_dt ours
@@ -145,7 +194,8 @@ class SamplingMPCConfig(ControllerConfig):
     compliance_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        for field, low in (("samples", 2), ("knots", 2), ("elites", 1), ("iterations", 1), ("threads", 1)):
+        counts = (("samples", 2), ("knots", 2), ("elites", 1), ("iterations", 1), ("threads", 1))
+        for field, low in (*counts, ("hypotheses", 1), ("particles", 2)):
             value = getattr(self, field)
             if not (isinstance(value, int) and not isinstance(value, bool) and value >= low):
                 raise InvalidField(self.name, field, f"must be an integer >= {low}, got {value!r}")
@@ -155,6 +205,14 @@ class SamplingMPCConfig(ControllerConfig):
         if self.method not in METHODS:
             raise InvalidField(
                 self.name, "method", f"must be one of {', '.join(METHODS)}, got {self.method!r}"
+            )
+        if self.risk not in RISKS:
+            raise InvalidField(self.name, "risk", f"must be one of {', '.join(RISKS)}, got {self.risk!r}")
+        if not self.friction_low <= self.friction_high:
+            raise InvalidField(
+                self.name,
+                "friction_high",
+                f"must be >= friction_low ({self.friction_low}), got {self.friction_high!r}",
             )
         check_multiple(self, "replan_dt")
         if self.horizon < 2.0 * self.model_dt:
@@ -256,6 +314,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         self._count = 0
         self._q_ref = np.array([1.0, 0.0, 0.0, 0.0])
         self.plan_times: list[float] = []
+        self.planner: BeliefPlanner | None = None  # once the task hands over
         self._reset_reference()
         self._mismatch = (0.0, 0.0)
 
@@ -314,6 +373,43 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
             mujoco.MjData(self._belief_model) for _ in range(c.threads - 1)
         ]
         self._plan = None
+        self.planner = None
+        if self._belief is not None and self._belief.plan_depth is not None:
+            self.planner = BeliefPlanner(
+                self._belief_model,
+                self._belief,
+                self._q_ref,
+                self.planner_settings(),
+                times=self._times,
+                steps=self._steps,
+                model_dt=c.model_dt,
+                filter_steps=max(1, round(c.replan_dt / c.model_dt)),
+                rollout=self._rollout,
+                rng=self._rng,
+            )
+            self.planner.use_threads(self._thread_data)
+
+    def planner_settings(self) -> PlannerSettings:
+        c = self.config
+        return PlannerSettings(
+            hypotheses=c.hypotheses,
+            particles=c.particles,
+            risk=c.risk,
+            samples=c.samples,
+            grasp_sigma=c.grasp_sigma,
+            depth_sigma=c.depth_sigma,
+            tilt_sigma=c.tilt_sigma,
+            friction_range=(c.friction_low, c.friction_high),
+            friction=c.friction,
+            filter_position=c.filter_position,
+            filter_force=c.filter_force,
+            filter_moment=c.filter_moment,
+            plan_noise_pos=c.plan_noise_pos,
+            plan_noise_rot=c.plan_noise_rot,
+            budget=c.budget,
+            slip_force=c.slip_force,
+            weights={term.name: float(getattr(c, f"w_{term.name}")) for term in TERMS},
+        )
 
     # -- the tip frame ----------------------------------------------------------------------------
     def _tip_state(self, state: ControlState) -> tuple[_Vec, _Vec, _Vec, _Vec]:
@@ -469,6 +565,16 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         self._plan = _Plan(state.t, self._times, reference + best, best)
         return "ok"
 
+    def _plan_goal(self, state: ControlState, wrench: tuple[_Vec, _Vec]) -> str:
+        """The belief planner's plan towards the task's goal (the target is not tracked)."""
+        assert self.planner is not None
+        tip, turn, v_tip, omega = self._tip_state(state)
+        x = np.concatenate([tip, turn, v_tip, omega])
+        setpoint = x[:6] if self._plan is None else self._plan.at(state.t)[0]
+        knots = self.planner.replan(state.t, x, wrench, setpoint)
+        self._plan = _Plan(state.t, self._times, knots, np.zeros_like(knots))
+        return "ok"
+
     # -- the controller ---------------------------------------------------------------------------
     def timings(self) -> list[SolveTiming]:
         return [SolveTiming("plan", self.config.replan_dt, self.plan_times)]
@@ -480,6 +586,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         self._belief = None  # the task states its belief again after a reset
         self._inner = None
         self._sensor = None
+        self.planner = None
         self._rng = np.random.default_rng(self.config.seed)
         self.plan_times = []
         self._reset_reference()
@@ -495,7 +602,11 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         if fresh or self._count % self._every == 0:
             check_target(target)
             t0 = time.perf_counter()
-            status = self._replan(state, target, wrench)
+            status = (
+                self._replan(state, target, wrench)
+                if self.planner is None
+                else self._plan_goal(state, wrench)
+            )
             self.plan_times.append(time.perf_counter() - t0)
         self._count += 1
         assert self._plan is not None

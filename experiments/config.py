@@ -242,18 +242,17 @@ class Job:
         return f"{self.controller_label}/{self.strategy}" if self.strategy else self.controller_label
 
 
-def _changed_fields(spec: ControllerConfig) -> dict[str, Any]:
-    """The fields of ``spec`` that differ from its class's defaults."""
-    default = to_dict(type(spec)())
-    return {k: v for k, v in to_dict(spec).items() if default.get(k) != v}
-
-
 def _controller_label(spec: ControllerConfig, all_specs: tuple[ControllerConfig, ...]) -> str:
-    """The controller's name, with its changed fields when the same name appears more than once."""
-    changed = _changed_fields(spec)
-    if sum(s.name == spec.name for s in all_specs) == 1 or not changed:
+    """The controller's name; when the same name appears more than once, with the fields in which
+    those configs differ (``sampling_mpc(hypotheses=1)``, ``sampling_mpc(hypotheses=4)``)."""
+    same = [to_dict(s) for s in all_specs if s.name == spec.name]
+    if len(same) == 1:
         return spec.name
-    inner = ",".join(f"{k}={v}" for k, v in sorted(changed.items()))
+    mine = to_dict(spec)
+    differ = {k: v for k, v in mine.items() if any(other.get(k) != v for other in same)}
+    if not differ:
+        return spec.name
+    inner = ",".join(f"{k}={v}" for k, v in sorted(differ.items()))
     return f"{spec.name}({inner})"
 
 

@@ -33,6 +33,9 @@ class Belief:
         peg_length: The peg's length [m].
         tip_body: The held peg's lower end (centre of its end face), gripper frame [m].
         axis_body: The held peg's axis (unit, pointing up out of the hole), gripper frame.
+        plan_depth: None while the task leads (a controller tracks its targets); once it hands
+            over, how far below the face the peg's end is to be seated [m]: a controller that
+            plans (``sampling_mpc``) plans towards that goal itself.
     """
 
     hole_xy: tuple[float, float]
@@ -45,6 +48,7 @@ class Belief:
     peg_length: float
     tip_body: tuple[float, float, float]
     axis_body: tuple[float, float, float]
+    plan_depth: float | None = None
 
 
 class HoleBelief:

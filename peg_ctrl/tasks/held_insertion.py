@@ -61,12 +61,12 @@ from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.planners.base import MotionLimits, Planner, Waypoint
 from peg_ctrl.sim.belief import Belief
-from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
-from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
-from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
+from peg_ctrl.sim.rotations import rotate, rotate_inv
+from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor, lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.held_start import Disturbance, check_start, place_held_start
 from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
     InsertionMeasure,
@@ -79,9 +79,8 @@ from peg_ctrl.tasks.monitors import (
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, PlannedMoves
 from peg_ctrl.tasks.pick_and_place import SuccessConfig
 from peg_ctrl.tasks.strategies import ForceConfig, Strategy, StrategyConfig
-from peg_ctrl.tasks.strategies.motions import about
 
-__all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]
+__all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]  # Disturbance: held_start
 
 _DISTURBANCES = (
     "lateral_error",
@@ -142,46 +141,8 @@ class HeldInsertionConfig(TaskSpec):
         )
 
     def check(self, scene: SceneConfig) -> None:
-        a = scene.assets
-        rim = a.peg_radius * math.sin(self.tilt_error)  # the low rim below the lower end's centre
-        if self.start_height <= rim:
-            raise ConfigError(
-                f"task.start_height must be above the tilted rim's drop of {rim * 1e3:.2f} mm, "
-                f"got {self.start_height!r}"
-            )
-        if self.grip_above_centre >= 0.5 * a.peg_length - 0.01:
-            raise ConfigError(
-                f"task.grip_above_centre must leave 10 mm of peg above the pads (< "
-                f"{0.5 * a.peg_length - 0.01:g} m), got {self.grip_above_centre!r}"
-            )
+        check_start(self, scene)
         self.strategy.check(scene, self)
-
-
-@dataclasses.dataclass(frozen=True)
-class Disturbance:
-    """One seed's draw: the in-hand offset's direction in the world and the gripper's yaw [rad],
-    the tilt's sign, observation noise (x, y) [m]. The offset lies in the pads' plane (a peg held
-    between two pads cannot sit off along their closing direction): ``draw`` takes its sign from a
-    uniform angle, and :meth:`in_pads_plane` turns it along the plane once the yaw is known."""
-
-    lateral_direction: float
-    yaw: float
-    tilt_sign: float
-    noise: tuple[float, float]
-
-    @classmethod
-    def draw(cls, rng: np.random.Generator, position_noise: float) -> Disturbance:
-        direction, yaw = (float(v) for v in rng.uniform(0.0, 2.0 * math.pi, size=2))
-        sign = 1.0 if rng.uniform() < 0.5 else -1.0
-        nx, ny = (float(v) for v in rng.normal(0.0, 1.0, size=2) * position_noise)
-        return cls(direction, yaw, sign, (nx, ny))
-
-    def in_pads_plane(self, closing: NDArray[np.float64]) -> Disturbance:
-        """The offset along the pads' plane, horizontal, across the closing direction
-        ``closing`` (world), on the side the drawn angle is on."""
-        across = math.atan2(float(closing[0]), -float(closing[1]))  # z x closing
-        side = 0.0 if math.cos(self.lateral_direction - across) >= 0 else math.pi
-        return dataclasses.replace(self, lateral_direction=across + side)
 
 
 class HeldInsertionTask(PlannedMoves):
@@ -233,6 +194,7 @@ class HeldInsertionTask(PlannedMoves):
         self._v_alpha = lowpass_alpha(_SPEED_HZ, control_dt)  # the hand velocity's low-pass gain
         self._belief: Belief | None = None
         self._belief_key: tuple[float, ...] = ()
+        self.plan_depth: float | None = None  # set when the strategy hands over to a planner
         self.strategy: Strategy = config.strategy.build(self)
         self.machine = PhaseMachine(self.phase_table())
 
@@ -282,6 +244,7 @@ class HeldInsertionTask(PlannedMoves):
             self.z_face,
             *self._b_body.tolist(),
             *self._up_body.tolist(),
+            self.plan_depth,
         )
         if self._belief is None or key != self._belief_key:
             self._belief_key = key
@@ -297,6 +260,7 @@ class HeldInsertionTask(PlannedMoves):
                 peg_length=float(a.peg_length),
                 tip_body=tuple(float(v) for v in self._b_body),  # type: ignore[arg-type]
                 axis_body=tuple(float(v) for v in self._up_body),  # type: ignore[arg-type]
+                plan_depth=self.plan_depth,
             )
         return self._belief
 
@@ -307,48 +271,9 @@ class HeldInsertionTask(PlannedMoves):
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
         """Draw the disturbances; place the peg in the closed hand above the hole."""
-        c, scene = self.cfg, self.scene
-        d = self.disturbance = Disturbance.draw(rng, c.position_noise)
-        q_grip = quat_mul(yaw_quat(d.yaw), Q_TURN)
-        # Tilt in the plane of the pads: about the jaw's closing direction (the gripper's x).
-        closing = rotate(q_grip, np.array([1.0, 0.0, 0.0]))
-        d = self.disturbance = d.in_pads_plane(closing)
-        q_peg = quat_mul(
-            about(closing, d.tilt_sign * c.tilt_error), quat_mul(q_grip, np.asarray(PEG_LYING_QUAT))
-        )
-        up = rotate(q_peg, np.array([0.0, 0.0, 1.0]))
-        up = up if up[2] > 0 else -up
-        hx, hy, top = self._place_block(model, rng)
-        mouth = np.array(
-            [
-                hx + c.lateral_error * math.cos(d.lateral_direction),
-                hy + c.lateral_error * math.sin(d.lateral_direction),
-                top,
-            ]
-        )
-        bottom = mouth + (c.start_height / up[2]) * up
-        rig = HeldRig(model)
-        pinch, _ = place_held_peg(
-            model,
-            data,
-            rig,
-            scene,
-            bottom=bottom,
-            q_grip=q_grip,
-            q_peg=q_peg,
-            grip_above_centre=c.grip_above_centre,
-        )
-        close_on_held_peg(model, data, rig, pinch, q_grip)
-        data.time = 0.0  # the closing builds the start state; the episode's clock starts here
-        # The believed grasp, in the gripper frame: the nominal one (peg upright in the hand),
-        # lateral_error off the true one; the hole as a camera sees it, in the world frame.
-        half = 0.5 * scene.assets.peg_length
-        b_world = -(c.grip_above_centre + half) * np.array([0.0, 0.0, 1.0]) + rotate(
-            q_grip, np.array([0.0, 0.0, -GRASP_OFFSET])
-        )
-        self._b_body = rotate_inv(q_grip, b_world - (mouth - np.array([hx, hy, top])))
-        self._up_body = rotate_inv(q_grip, np.array([0.0, 0.0, 1.0]))
-        self.observed_hole = np.array([hx, hy]) + np.asarray(d.noise)
+        start = place_held_start(model, data, rng, self.cfg, self.scene, self.insertion, self.block_top)
+        self.disturbance, self.drawing_sides = start.disturbance, start.drawing_sides
+        self._b_body, self._up_body, self.observed_hole = start.b_body, start.up_body, start.observed_hole
         self.contact.reset()
         self._v_samples: list[float] = []
         self._v_noise = 0.0  # standard deviation of the filtered vertical speed [m/s]
@@ -356,6 +281,7 @@ class HeldInsertionTask(PlannedMoves):
         self._grasp_body = self._b_body + self._grip_length * self._up_body
         self.z_face = self.block_top
         self.aligned_tilt = None
+        self.plan_depth = None
         self._wrist = WristSensor(
             model, centre_body=self._b_body, dt=self.control_dt, force_hz=30.0, accel_hz=_ACCEL_HZ
         )
@@ -407,19 +333,6 @@ class HeldInsertionTask(PlannedMoves):
         return classify_end_state(
             m, clearance=self.hole_radius - self.radius, chamfer=self.chamfer, radius=self.radius
         )
-
-    def _place_block(self, model: mujoco.MjModel, rng: np.random.Generator) -> tuple[float, float, float]:
-        """Put the block off its drawing by ``drawing_tolerance`` (nothing drawn at 0): the block
-        (its face and hole) by one draw per axis, the drawing's distances from the hole's axis to
-        the four sides (+x, -x, +y, -y: ``drawing_sides`` [m]) by one each. The insertion monitor
-        measures against the true hole. Returns the hole's mouth (x, y, z) [m]."""
-        tol = self.cfg.drawing_tolerance
-        delta = rng.uniform(-tol, tol, size=7) if tol > 0 else np.zeros(7)
-        model.body_pos[model.body("block").id] = np.asarray(self.scene.block_pos) + delta[:3]
-        half = np.repeat(0.5 * np.asarray(self.scene.assets.block_size[:2], dtype=float), 2)
-        self.drawing_sides = half + delta[3:]
-        hx, hy = self.scene.hole_xy
-        return self.insertion.locate(hx + delta[0], hy + delta[1], self.block_top + delta[2])
 
     # -- what the task believes -------------------------------------------------------------------
     def believed_bottom(self, obs: Observation) -> NDArray[np.float64]:

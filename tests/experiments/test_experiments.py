@@ -332,8 +332,8 @@ def test_a_bad_linked_axis_is_named(axis: dict[str, object], message: str) -> No
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: unknown strategy 'poke'; known: align, force, locate, probe, spiral, straight, "
-            "tilt",
+            "strategies[0]: unknown strategy 'poke'; known: align, force, locate, plan, probe, spiral, "
+            "straight, tilt",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",
@@ -379,6 +379,36 @@ def test_bad_contact_studies_fail_in_one_line(text: str, message: str) -> None:
     with pytest.raises(ConfigError) as err:
         experiment_from_mapping(yaml.safe_load(text))
     assert message in str(err.value)
+
+
+def test_a_controller_named_twice_is_labelled_by_what_differs() -> None:
+    """Two configs of one controller are two arms, each labelled by the fields in which they
+    differ (not by every field off its defaults: the shared ones would repeat in both)."""
+    from peg_ctrl.experiments.config import arms
+
+    inner = {"k_pos": [3000.0] * 3, "k_rot": [2.0] * 3, "damping_compensation": 0.9}
+    exp = experiment_from_mapping(
+        {
+            "name": "ablation",
+            "controllers": [
+                {"name": "sampling_mpc", "hypotheses": 4, "inner": inner},
+                {"name": "sampling_mpc", "hypotheses": 1, "inner": inner},
+                "pd",
+            ],
+            "task": {"name": "held_insertion"},
+            "strategies": ["plan", "straight"],
+            "arms": {
+                "sampling_mpc(hypotheses=4)": ["plan"],
+                "sampling_mpc(hypotheses=1)": ["plan"],
+                "pd": ["straight"],
+            },
+        }
+    )
+    assert arms(exp) == [
+        ("sampling_mpc(hypotheses=4)/plan", "sampling_mpc"),
+        ("sampling_mpc(hypotheses=1)/plan", "sampling_mpc"),
+        ("pd/straight", "pd"),
+    ]
 
 
 def test_a_small_contact_sweep_writes_its_metrics_statistics_and_plots(tmp_path: Path) -> None:

@@ -53,8 +53,8 @@ def test_the_task_family_is_chosen_by_name() -> None:
     [
         (
             ["task.strategy=wiggle"],
-            "task.strategy: unknown strategy 'wiggle'; known: align, force, locate, probe, spiral, straight, "
-            "tilt",
+            "task.strategy: unknown strategy 'wiggle'; known: align, force, locate, plan, probe, spiral, "
+            "straight, tilt",
         ),
         (["task.lateral_error=-0.001"], "task.lateral_error must be >= 0, got -0.001"),
         (["task.tilt_error=0.3"], "task.tilt_error must be below 0.2 rad, got 0.3"),

@@ -22,6 +22,7 @@ from peg_ctrl.tasks.strategies.base import (
 )
 from peg_ctrl.tasks.strategies.force import ForceConfig, ForceStrategy
 from peg_ctrl.tasks.strategies.locate import LocateConfig, LocateStrategy
+from peg_ctrl.tasks.strategies.plan import PlanConfig, PlanStrategy
 from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
 from peg_ctrl.tasks.strategies.spiral import SpiralConfig, SpiralStrategy
 from peg_ctrl.tasks.strategies.straight import StraightConfig, StraightStrategy
@@ -41,6 +42,8 @@ __all__ = [
     "ForceStrategy",
     "LocateConfig",
     "LocateStrategy",
+    "PlanConfig",
+    "PlanStrategy",
     "ProbeConfig",
     "ProbeStrategy",
     "SpiralConfig",
@@ -57,7 +60,16 @@ __all__ = [
 #: Strategy name -> its config class (whose ``build(task)`` makes the strategy).
 STRATEGIES: dict[str, type[StrategyConfig]] = {
     cfg.name: cfg
-    for cfg in (StraightConfig, ForceConfig, SpiralConfig, TiltConfig, AlignConfig, ProbeConfig, LocateConfig)
+    for cfg in (
+        StraightConfig,
+        ForceConfig,
+        SpiralConfig,
+        TiltConfig,
+        AlignConfig,
+        ProbeConfig,
+        LocateConfig,
+        PlanConfig,
+    )
 }
 
 

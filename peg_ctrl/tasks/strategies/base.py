@@ -91,6 +91,7 @@ class HeldInsertion(Protocol):
     drawing_sides: _Vec
     z_face: float
     machine: PhaseMachine
+    plan_depth: float | None  # set: the strategy hands over to a planning controller (Belief.plan_depth)
 
     contact: Detector
 
