@@ -23,17 +23,8 @@ Task (``task=``, a task name or a mapping ``{name: ..., <field>: ...}``)
     agent's actions replace its phase machine.
 
 Action (``action_mode=``), ``float32``, shape ``(7,)``
-    ``"delta"`` (default): ``[dx, dy, dz, droll, dpitch, dyaw, jaw]`` in ``[-1, 1]``. The target
-    pose is the gripper's *measured* pose moved by ``a[:3] * MAX_SPEED * control_dt`` [m] and
-    turned by ``a[3:6] * MAX_ANGULAR_SPEED * control_dt`` [rad] (extrinsic X-Y-Z in the world
-    frame), with the same velocity as a feed-forward; ``jaw`` sets the pad separation: ``-1``
-    fully open (0.085 m), ``+1`` closed (robosuite's convention).
-    ``"absolute"``: the command API ``[x, y, z, roll, pitch, yaw, jaw_sep_m]`` (see
-    :mod:`peg_ctrl.commands`) in the world frame, bounded by :data:`WORKSPACE` and ``[0, 0.085]``
-    m. Actions outside the space are clipped; a non-finite action raises ``ValueError``.
-    The mode is an option of the environment, not a wrapper: a delta action is turned into a
-    target from the pose *measured* at that step, with its velocity as a feed-forward, which a
-    wrapper mapping it onto the absolute action (pose only) would lose.
+    ``"delta"`` (default): a velocity in ``[-1, 1]`` and the jaw; ``"absolute"``: the command
+    API's pose and the jaw's separation; see :mod:`peg_ctrl.gym.actions`.
 
 Observation, a ``Dict`` of ``float32`` arrays (world frame unless stated; quaternions ``[w, x,
 y, z]`` with ``w >= 0``)
@@ -120,7 +111,7 @@ import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import gymnasium
 import mujoco
@@ -128,23 +119,21 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from peg_ctrl.commands import JAW_SEP_MAX_M, GripperTarget, euler_to_quat
 from peg_ctrl.config import ConfigError, read_mapping
 from peg_ctrl.errors import CommandError, EpisodeFailure
+from peg_ctrl.gym.actions import (
+    ACTION_MODES,
+    MAX_ANGULAR_SPEED,
+    MAX_SPEED,
+    WORKSPACE,
+    action_space,
+    action_target,
+)
+from peg_ctrl.gym.agent_task import AgentTask
 from peg_ctrl.run.episode import DomainConfig, EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.run.loop import Loop, StepInfo
 from peg_ctrl.run.recorders import FollowCamera, offscreen_renderer
-from peg_ctrl.sim.rotations import quat_mul, rotate_inv
 from peg_ctrl.sim.state import BLOCK_PEG, ft_world
-from peg_ctrl.tasks.base import (
-    Capabilities,
-    Evaluation,
-    Observation,
-    PhaseRecord,
-    Task,
-    close_open_record,
-    insertion_task,
-)
 
 __all__ = [
     "ENV_ID",
@@ -161,75 +150,7 @@ __all__ = [
 ENV_ID = "peg_ctrl/PegInsertion-v0"
 #: The registered time limit, in control periods: 5 s of the default ``pd`` controller's 5 ms.
 MAX_EPISODE_STEPS = 1000
-ACTION_MODES = ("delta", "absolute")
-#: Bounds of the commanded pinch point in absolute mode, ``(low, high)`` per axis [m].
-WORKSPACE = ((-0.45, -0.3, 0.0), (0.45, 0.3, 0.4))
-MAX_SPEED = 0.2  # [m/s] of a full delta action
-MAX_ANGULAR_SPEED = 2.0  # [rad/s] of a full delta action
 SPARSE_REWARD = (1.0, -1.0)  # the environment's own reward: (seated, a monitor failed the episode)
-
-
-class AgentTask:
-    """A task whose targets are an agent's commands: the start state and the insertion check
-    come from ``inner`` (a task family's task), whose own phase machine is not run.
-
-    Success is ``inner``'s seated criterion held for its ``SeatedHold`` steps; the episode
-    never ends by itself otherwise (the environment truncates it).
-    """
-
-    name = "agent"
-    phases: tuple[str, ...] = ("agent",)
-    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True)
-
-    def __init__(self, inner: Task) -> None:
-        inserting = insertion_task(inner)
-        if inserting is None:
-            raise ConfigError(f"task {inner.name!r} has no insertion check to drive with actions")
-        self.inner = inner
-        self.insertion = inserting.insertion
-        self.seated = inserting.seated
-        self.command: GripperTarget | None = None
-        self._records: list[PhaseRecord] = []
-
-    @property
-    def phase(self) -> str:
-        return "agent"
-
-    @property
-    def grasped(self) -> bool:
-        return self.inner.grasped
-
-    @property
-    def time_to_insert(self) -> float | None:
-        return self.seated.since
-
-    @property
-    def records(self) -> list[PhaseRecord]:
-        return self._records
-
-    def reset(self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator) -> None:
-        self.inner.reset(model, data, rng)
-        self.seated.reset()
-        self._records = []
-        self.command = None
-
-    def start(self, obs: Observation) -> None:
-        self._records.append(PhaseRecord("agent", obs.t))
-
-    def target(self, obs: Observation) -> GripperTarget:
-        if self.command is None:
-            raise RuntimeError("AgentTask.target before a command was set")
-        return self.command
-
-    def evaluate(self, obs: Observation) -> Evaluation:
-        m = self.insertion.measure(obs.peg)
-        if self.seated.update(obs.t, self.insertion.criterion(m)):
-            self.finish(obs.t, "inserted")
-            return Evaluation(True, True, "", "seated", m)
-        return Evaluation(False, False, "", "", m)
-
-    def finish(self, t: float, outcome: str) -> None:
-        close_open_record(self._records, t, outcome)
 
 
 class _LastStep:
@@ -312,20 +233,6 @@ def _observation_space() -> spaces.Dict:
     )
 
 
-def _action_space(action_mode: str) -> spaces.Box:
-    """``delta``: 7 values in [-1, 1]; ``absolute``: the command API's pose in the workspace and
-    the jaw's separation."""
-    if action_mode == "delta":
-        return _vector(-1.0, 1.0, 7)
-    (x0, y0, z0), (x1, y1, z1) = WORKSPACE
-    pi = math.pi
-    return spaces.Box(
-        np.array([x0, y0, z0, -pi, -pi / 2, -pi, 0.0], dtype=np.float32),
-        np.array([x1, y1, z1, pi, pi / 2, pi, JAW_SEP_MAX_M], dtype=np.float32),
-        dtype=np.float32,
-    )
-
-
 class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
     """Peg-in-hole insertion with the Robotiq 2F-85 on a 6-DoF base (see the module docstring)."""
 
@@ -366,7 +273,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             )
         self.fixed_jaw = bool(fixed_jaw)
         self.observation_space = _observation_space()
-        self.action_space = _action_space(self.action_mode)
+        self.action_space = action_space(self.action_mode)
         self._renderer: mujoco.Renderer | None = None
         self._camera: FollowCamera | None = None
         self._viewer: Any = None
@@ -420,7 +327,9 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
             raise CommandError(f"action must have shape (7,), got {np.shape(action)}")
         if not np.all(np.isfinite(a)):
             raise CommandError(f"action must be finite, got {a.tolist()}")
-        self.task.command = self._target(a)
+        self.task.command = action_target(
+            self.action_mode, a, self.loop.state(), self.control_dt, fixed_jaw=self.fixed_jaw
+        )
         success, reason = False, ""
         try:
             evaluation = self.loop.step()
@@ -451,25 +360,6 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
         self._close_renderers()
 
     # -- pieces ---------------------------------------------------------------------------------
-    def _target(self, a: NDArray[np.float64]) -> GripperTarget:
-        if self.action_mode == "absolute":
-            low, high = self.action_space.low, self.action_space.high  # type: ignore[attr-defined]
-            u = np.clip(a, low, high)
-            q = euler_to_quat(*u[3:6])
-            jaw = 0.0 if self.fixed_jaw else float(u[6])
-            return GripperTarget.trusted(u[:3], q, np.zeros(3), np.zeros(3), jaw)
-        a = np.clip(a, -1.0, 1.0)
-        s = self.loop.state()
-        dt = self.control_dt
-        v = a[:3] * MAX_SPEED
-        w_world = a[3:6] * MAX_ANGULAR_SPEED
-        low, high = WORKSPACE
-        p = np.clip(s.p_world + v * dt, low, high)
-        q = quat_mul(euler_to_quat(*(w_world * dt)), s.quat_world)
-        q /= np.linalg.norm(q)
-        jaw = 0.0 if self.fixed_jaw else 0.5 * (1.0 - a[6]) * JAW_SEP_MAX_M
-        return GripperTarget.trusted(p, q, v, rotate_inv(q, w_world), jaw)
-
     def _observation(self) -> dict[str, NDArray[np.float32]]:
         """The observation now: the gripper as sensed (the reading the next step acts on)."""
         s = self.loop.sensed()
