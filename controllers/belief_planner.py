@@ -285,7 +285,6 @@ class BeliefPlanner:
         self.hyp.reweigh(loglik)
         if self.hyp.ess < 0.5 * n:
             self.hyp.resample(self._rng)
-            self._models = [copy.copy(self._models[0]) for _ in range(n)]
             for m, mu in zip(self._models, self.hyp.friction.tolist(), strict=True):
                 m.pair_friction[:, :2] = mu
 

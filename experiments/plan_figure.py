@@ -1,7 +1,7 @@
 """What the belief planner did in one episode, as a figure: the end's path over the hole, and the
 belief's spread and the depth against time.
 
-    python -m experiments.plan_figure runs/plan/episodes/KEY --out docs/plan/success.png
+    python -m peg_ctrl.experiments.plan_figure runs/plan/episodes/KEY --out docs/plan/success.png
 
 The episode is run again from its ``config.json`` (the same seed: the same episode, checked
 against its ``summary.json``: the peak force and the outcome must agree, or it stops). At every
@@ -61,7 +61,8 @@ def trace_episode(episode_dir: Path) -> dict[str, Any]:
             break
     summary = json.loads((episode_dir / "summary.json").read_text())
     peak = float(loop.contact.peak_block)
-    if not np.isclose(peak, summary["peak_contact_force_n"], rtol=1e-9) or ev.success != summary["success"]:
+    recorded = summary["status"] == "success"
+    if not np.isclose(peak, summary["peak_contact_force_n"], rtol=1e-9) or ev.success != recorded:
         raise ConfigError(
             f"{episode_dir}: the rerun differs from the recorded episode (peak {peak:.3f} N against "
             f"{summary['peak_contact_force_n']:.3f} N): not the code that ran it"
@@ -131,7 +132,7 @@ def draw(trace: dict[str, Any], out: Path, title: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m experiments.plan_figure", description=__doc__.splitlines()[0]
+        prog="python -m peg_ctrl.experiments.plan_figure", description=__doc__.splitlines()[0]
     )
     parser.add_argument("episode", type=Path, help="an episode's directory (runs/<study>/episodes/<key>)")
     parser.add_argument(
