@@ -17,6 +17,7 @@ from peg_ctrl.sim.grasp_start import GRASP_OFFSET, Q_TURN, HeldRig, close_on_hel
 from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import PEG_LYING_QUAT, SceneConfig
 from peg_ctrl.tasks.monitors import InsertionMonitor
+from peg_ctrl.tasks.strategies.base import TaskDisturbance
 from peg_ctrl.tasks.strategies.motions import about
 
 __all__ = ["Disturbance", "HeldStart", "StartSpec", "check_start", "place_held_start"]
@@ -24,21 +25,15 @@ __all__ = ["Disturbance", "HeldStart", "StartSpec", "check_start", "place_held_s
 _Vec = NDArray[np.float64]
 
 
-class StartSpec(Protocol):
-    """What the start needs of the task's config [m, rad]."""
+class StartSpec(TaskDisturbance, Protocol):
+    """What the start needs of the task's config [m, rad]: the disturbances a strategy may read,
+    the drawing's tolerance and the start's height."""
 
     @property
-    def lateral_error(self) -> float: ...
-    @property
-    def tilt_error(self) -> float: ...
-    @property
-    def position_noise(self) -> float: ...
-    @property
     def drawing_tolerance(self) -> float: ...
+
     @property
     def start_height(self) -> float: ...
-    @property
-    def grip_above_centre(self) -> float: ...
 
 
 @dataclasses.dataclass(frozen=True)
