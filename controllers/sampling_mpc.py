@@ -18,13 +18,13 @@ Methods (``method``), as in MuJoCo MPC's planners:
 - ``cem``: ``iterations`` rounds of sampling around a mean and refitting mean and spread to the
   ``elites`` cheapest.
 
-Plans are offsets from a reference: the target's pose, extrapolated at its velocity, except on
-the target's wrench-controlled axes, where the reference is an accommodation law on the sensed
-wrench (it moves at ``(F - F*) / force_damping``, capped at ``max_contact_speed``, and turns at
-``(M - M*) / moment_damping``, capped at ``max_turn_rate``), so a free axis approaches a surface
-and a tilted peg turns flat even where the belief model sees no contact. The nominal offsets of
-the next replan are the chosen ones, shifted in time (warm start); the reference itself (zero
-offset) is always one of the samples.
+Plans are offsets from a reference: the target's pose, extrapolated at its velocity and angular
+velocity, except on the target's wrench-controlled axes, where the reference is an
+accommodation law on the sensed wrench (it moves at ``(F - F*) / force_damping``, capped at
+``max_contact_speed``, and turns at ``(M - M*) / moment_damping``, capped at ``max_turn_rate``),
+so a free axis approaches a surface and a tilted peg turns flat even where the belief model sees
+no contact. The nominal offsets of the next replan are the chosen ones, shifted in time (warm
+start); the reference itself (zero offset) is always one of the samples.
 
 Cost of a rollout, summed over its steps (units: m, rad, N, N m)::
 
@@ -422,8 +422,10 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         turn = _quat_to_turn(quat_mul(q, _conj(self._q_ref)))
         return tip, turn, v_tip, omega
 
-    def _target_tip(self, target: GripperTarget) -> tuple[_Vec, _Vec, _Vec]:
-        """The reference's tip position, turn and tip velocity (the accommodation on wrench axes)."""
+    def _target_tip(self, target: GripperTarget) -> tuple[_Vec, _Vec, _Vec, _Vec]:
+        """The reference's tip position, turn, tip velocity and turn rate (the accommodation on
+        wrench axes; the target's angular velocity, world, on the pose axes: hinge rates for
+        small turns)."""
         q = np.asarray(target.quat_world)
         r = rotate(q, self.tip_body)
         omega = rotate(q, target.omega_body)
@@ -434,7 +436,8 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         tip = np.where(axes[:3], self._acc_tip, tip)
         v = np.where(axes[:3], self._acc_rate[:3], v)
         turn = turn + self._acc_turn
-        return tip, turn, v
+        rate = np.where(axes[3:], 0.0, omega)
+        return tip, turn, v, rate
 
     def _accommodate(self, state: ControlState, target: GripperTarget, wrench: tuple[_Vec, _Vec]) -> None:
         """Advance the reference along the wrench-controlled axes (see the module docstring)."""
@@ -495,12 +498,13 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         # peg, in the peg's frame; the turns are small), corrected by the measured one.
         force = -sensors[:, :, :3] - (-start_force) + wrench[0]
         moment = -sensors[:, :, 3:6] - (-start_moment) + wrench[1]
-        tip_t, turn_t, v_t = self._target_tip(target)
+        tip_t, turn_t, v_t, w_t = self._target_tip(target)
         tip_ref = tip_t + steps[:, None] * v_t
+        turn_ref = turn_t + steps[:, None] * w_t
         axes_f = target.force_axes if target.force_controlled else np.zeros(3, dtype=bool)
         axes_m = target.moment_axes if target.force_controlled else np.zeros(3, dtype=bool)
         cost = c.w_pose * np.sum(((qpos[:, :, :3] - tip_ref) ** 2) * ~axes_f, axis=(1, 2))
-        cost += c.w_turn * np.sum(((qpos[:, :, 3:6] - turn_t) ** 2) * ~axes_m, axis=(1, 2))
+        cost += c.w_turn * np.sum(((qpos[:, :, 3:6] - turn_ref) ** 2) * ~axes_m, axis=(1, 2))
         if axes_f.any():
             cost += c.w_force * np.sum(((force + target.force_world) ** 2) * axes_f, axis=(1, 2))
         if axes_m.any():
@@ -513,9 +517,11 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         return cost
 
     def _reference(self, target: GripperTarget) -> _Vec:
-        """The target's pose at the knots (knots, 6), extrapolated at its velocity."""
-        tip_t, turn_t, v_t = self._target_tip(target)
-        return np.array([np.concatenate([tip_t + v_t * s, turn_t]) for s in self._times])
+        """The target's pose at the knots (knots, 6), extrapolated at its velocity and turn rate
+        (a reference that does not turn ahead leaves the inner loop no angular feed-forward: the
+        hand lagged a 1.5 rad/s turn by 0.3 rad)."""
+        tip_t, turn_t, v_t, w_t = self._target_tip(target)
+        return np.array([np.concatenate([tip_t + v_t * s, turn_t + w_t * s]) for s in self._times])
 
     def _nominal(self, t: float) -> _Vec:
         """The warm start: the last plan's offsets from the reference, shifted to ``t``."""
