@@ -44,6 +44,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from typing import Any
 
 import mujoco
 import mujoco.rollout
@@ -54,12 +55,22 @@ from peg_ctrl.controllers.residuals import Rollouts, term_costs
 from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.rotations import rotate
 
-__all__ = ["PlannerSettings", "Hypotheses", "BeliefPlanner", "PlanRecord", "RISKS"]
+__all__ = ["PlannerSettings", "Hypotheses", "BeliefPlanner", "PlanRecord", "RISKS", "knot_setpoints"]
 
 RISKS = ("mean", "worst")
 _FREE_MARGIN = 0.0005  # [m] the end is in the bore this far below the chamfer
 _NEAR_HEIGHT = 0.0005  # [m] ... and near the face below this height above it
 _Vec = NDArray[np.float64]
+
+
+def knot_setpoints(times: _Vec, plans: _Vec, at: NDArray[np.floating[Any]]) -> _Vec:
+    """(n, len(at), 6) the setpoints of ``plans`` (n, knots, 6) at the times ``at`` [s]: linear
+    interpolation through the knots at ``times``, held beyond the last."""
+    out = np.empty((len(plans), len(at), 6))
+    for j in range(len(plans)):
+        for i in range(6):
+            out[j, :, i] = np.interp(at, times, plans[j, :, i])
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,7 +197,8 @@ class BeliefPlanner:
         settings: the planner's parameters.
         times: (knots,) the plan's knot times over the horizon [s]; ``steps``, ``model_dt``:
             the horizon in model steps; ``filter_steps``: a replan period in model steps.
-        rollout: the controller's :class:`mujoco.rollout.Rollout`; ``rng``: its random stream.
+        rollout: the controller's :class:`mujoco.rollout.Rollout`; ``datas``: one MjData of the
+            model per rollout thread; ``rng``: the controller's random stream.
     """
 
     def __init__(
@@ -201,6 +213,7 @@ class BeliefPlanner:
         model_dt: float,
         filter_steps: int,
         rollout: mujoco.rollout.Rollout,
+        datas: list[mujoco.MjData],
         rng: np.random.Generator,
     ) -> None:
         assert belief.plan_depth is not None
@@ -218,17 +231,14 @@ class BeliefPlanner:
             m = copy.copy(model)
             m.pair_friction[:, :2] = mu
             self._models.append(m)
-        self._data = mujoco.MjData(model)
-        self._datas = [self._data]
+        self._data = mujoco.MjData(model)  # the states' scratch
+        self._datas = datas
         self._nq = model.nq
         self._hole = np.array([belief.hole_xy[0], belief.hole_xy[1], belief.face_z])
-        self._last: tuple[_Vec, _Vec, _Vec] | None = None  # state, controls, tip measured
+        self._last: tuple[_Vec, _Vec] | None = None  # the state measured, the controls executed since
         self._plan: _Vec | None = None  # knots (knots, 6), absolute
         self._plan_t = 0.0
         self.history: list[PlanRecord] = []
-
-    def use_threads(self, datas: list[mujoco.MjData]) -> None:
-        self._datas = datas
 
     # -- states --------------------------------------------------------------------------------
     def _states(self, x: _Vec, shifts: _Vec) -> _Vec:
@@ -244,15 +254,6 @@ class BeliefPlanner:
         states[:, 1:7] += shifts
         return states
 
-    def _controls(self, plans: _Vec, steps: int) -> _Vec:
-        """(n, steps, 6) the setpoints of ``plans`` (n, knots, 6), interpolated at the model's steps."""
-        at = np.arange(1, steps + 1) * self._dt
-        out = np.empty((len(plans), steps, 6))
-        for j in range(len(plans)):
-            for i in range(6):
-                out[j, :, i] = np.interp(at, self._times, plans[j, :, i])
-        return out
-
     def _run(self, models: list[mujoco.MjModel], states: _Vec, controls: _Vec) -> tuple[_Vec, _Vec, _Vec]:
         """Positions (n, steps, 6), velocities (n, steps, 6) and contact forces (n, steps, 3)."""
         out, sensors = self._rollout.rollout(models, self._datas, states, controls)
@@ -264,7 +265,8 @@ class BeliefPlanner:
         """Weigh each hypothesis by how well it predicted the last period (see the module doc)."""
         if self._last is None or len(self.hyp.weights) == 1:
             return
-        x0, controls, tip0 = self._last
+        x0, controls = self._last
+        tip0 = x0[:3]
         shifts = self.hyp.shifts
         n = len(shifts)
         ctrl = np.repeat(controls[None], n, axis=0) + shifts[:, None, :]
@@ -317,7 +319,7 @@ class BeliefPlanner:
         shifts = hyp.shifts[idx]
         plans = self._candidates(t, setpoint)
         n, k = len(plans), len(idx)
-        controls = self._controls(plans, self._steps)
+        controls = knot_setpoints(self._times, plans, np.arange(1, self._steps + 1) * self._dt)
         ctrl = np.repeat(controls, k, axis=0) + np.tile(shifts[:, None, :], (n, 1, 1))
         states = np.tile(self._states(x, shifts), (n, 1))
         models = [self._models[i] for i in idx.tolist()] * n
@@ -341,7 +343,7 @@ class BeliefPlanner:
         score = total.mean(axis=1) if s.risk == "mean" else total.max(axis=1)
         best = int(np.argmin(score))
         self._plan, self._plan_t = plans[best], t
-        self._last = (x.copy(), controls[best, : self._filter_steps], x[:3].copy())
+        self._last = (x.copy(), controls[best, : self._filter_steps])
         chosen = {name: float(c.reshape(n, k)[best].mean()) for name, c in terms.items()}
         self.history.append(PlanRecord(t, tuple(hyp.mean.tolist()), hyp.spread, hyp.ess, chosen))  # type: ignore[arg-type]
         return plans[best]

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Residual", "Rollouts", "TERMS", "total_cost", "term_costs"]
+__all__ = ["Residual", "Rollouts", "TERMS", "term_costs"]
 
 _Arr = NDArray[np.float64]
 
@@ -138,9 +138,3 @@ def term_costs(rollouts: Rollouts, weights: dict[str, float]) -> dict[str, _Arr]
             r = term.fn(rollouts)
             out[term.name] = w * np.sum(r.reshape(len(r), -1) ** 2, axis=1)
     return out
-
-
-def total_cost(rollouts: Rollouts, weights: dict[str, float]) -> _Arr:
-    """(n,) every rollout's cost: the weighted terms summed."""
-    costs = term_costs(rollouts, weights)
-    return np.sum(list(costs.values()), axis=0) if costs else np.zeros(len(rollouts.tip))

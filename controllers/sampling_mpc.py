@@ -81,7 +81,7 @@ from peg_ctrl.controllers.base import (
     check_target,
 )
 from peg_ctrl.controllers.belief_model import BeliefModelSpec, build_belief_model
-from peg_ctrl.controllers.belief_planner import RISKS, BeliefPlanner, PlannerSettings
+from peg_ctrl.controllers.belief_planner import RISKS, BeliefPlanner, PlannerSettings, knot_setpoints
 from peg_ctrl.controllers.impedance import ImpedanceConfig, ImpedanceController
 from peg_ctrl.controllers.residuals import TERMS
 from peg_ctrl.sim.belief import Belief
@@ -226,6 +226,28 @@ class SamplingMPCConfig(ControllerConfig):
 
     def build(self, model: mujoco.MjModel) -> SamplingMPCController:
         return SamplingMPCController(model, self)
+
+    def planner_settings(self) -> PlannerSettings:
+        """The belief planner's parameters, from this config's fields of the same names."""
+        return PlannerSettings(
+            hypotheses=self.hypotheses,
+            particles=self.particles,
+            risk=self.risk,
+            samples=self.samples,
+            grasp_sigma=self.grasp_sigma,
+            depth_sigma=self.depth_sigma,
+            tilt_sigma=self.tilt_sigma,
+            friction_range=(self.friction_low, self.friction_high),
+            friction=self.friction,
+            filter_position=self.filter_position,
+            filter_force=self.filter_force,
+            filter_moment=self.filter_moment,
+            plan_noise_pos=self.plan_noise_pos,
+            plan_noise_rot=self.plan_noise_rot,
+            budget=self.budget,
+            slip_force=self.slip_force,
+            weights={term.name: float(getattr(self, f"w_{term.name}")) for term in TERMS},
+        )
 
 
 class _Plan:
@@ -379,37 +401,15 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
                 self._belief_model,
                 self._belief,
                 self._q_ref,
-                self.planner_settings(),
+                c.planner_settings(),
                 times=self._times,
                 steps=self._steps,
                 model_dt=c.model_dt,
                 filter_steps=max(1, round(c.replan_dt / c.model_dt)),
                 rollout=self._rollout,
+                datas=self._thread_data,
                 rng=self._rng,
             )
-            self.planner.use_threads(self._thread_data)
-
-    def planner_settings(self) -> PlannerSettings:
-        c = self.config
-        return PlannerSettings(
-            hypotheses=c.hypotheses,
-            particles=c.particles,
-            risk=c.risk,
-            samples=c.samples,
-            grasp_sigma=c.grasp_sigma,
-            depth_sigma=c.depth_sigma,
-            tilt_sigma=c.tilt_sigma,
-            friction_range=(c.friction_low, c.friction_high),
-            friction=c.friction,
-            filter_position=c.filter_position,
-            filter_force=c.filter_force,
-            filter_moment=c.filter_moment,
-            plan_noise_pos=c.plan_noise_pos,
-            plan_noise_rot=c.plan_noise_rot,
-            budget=c.budget,
-            slip_force=c.slip_force,
-            weights={term.name: float(getattr(c, f"w_{term.name}")) for term in TERMS},
-        )
 
     # -- the tip frame ----------------------------------------------------------------------------
     def _tip_state(self, state: ControlState) -> tuple[_Vec, _Vec, _Vec, _Vec]:
@@ -487,10 +487,7 @@ class SamplingMPCController(ControllerBase[SamplingMPCConfig]):
         mujoco.mj_getState(m, d, initial, mujoco.mjtState.mjSTATE_FULLPHYSICS)
         n = plans.shape[0]
         steps = np.arange(1, self._steps + 1) * c.model_dt
-        controls = np.empty((n, self._steps, 6))
-        for i in range(6):  # linear interpolation through the knots, every plan at once
-            for j in range(n):
-                controls[j, :, i] = np.interp(steps, self._times, plans[j, :, i])
+        controls = knot_setpoints(self._times, plans, steps)
         data = self._thread_data if len(self._thread_data) > 1 else d
         states, sensors = self._rollout.rollout(m, data, np.tile(initial, (n, 1)), controls)
         qpos = states[:, :, 1 : 1 + m.nq]

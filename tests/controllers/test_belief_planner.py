@@ -13,16 +13,14 @@ import pytest
 from peg_ctrl.controllers.belief_model import build_belief_model
 from peg_ctrl.controllers.belief_planner import BeliefPlanner, Hypotheses, PlannerSettings
 from peg_ctrl.controllers.residuals import TERMS, Rollouts, term_costs
-from peg_ctrl.controllers.sampling_mpc import SamplingMPCConfig, SamplingMPCController
+from peg_ctrl.controllers.sampling_mpc import SamplingMPCConfig
 from peg_ctrl.errors import ConfigError
 
 from .test_sampling_mpc import BELIEF, Q_REF, SPEC
 
 
 def settings(**changes: object) -> PlannerSettings:
-    controller = SamplingMPCController.__new__(SamplingMPCController)
-    controller.config = SamplingMPCConfig()
-    return dataclasses.replace(controller.planner_settings(), **changes)  # type: ignore[arg-type]
+    return dataclasses.replace(SamplingMPCConfig().planner_settings(), **changes)  # type: ignore[arg-type]
 
 
 def test_every_term_is_weighed_by_a_config_field() -> None:
@@ -150,6 +148,7 @@ def test_a_landing_on_the_face_says_where_the_hole_is_not(model: mujoco.MjModel)
         model_dt=0.002,
         filter_steps=10,
         rollout=mujoco.rollout.Rollout(nthread=1),
+        datas=[mujoco.MjData(m)],
         rng=np.random.default_rng(0),
     )
     h = planner.hyp
@@ -164,7 +163,7 @@ def test_a_landing_on_the_face_says_where_the_hole_is_not(model: mujoco.MjModel)
     end = out[0, -1, 1:7] - h.shifts[1]
     x = np.concatenate([end[:3], end[3:], np.zeros(6)])
     wrench = (-sensors[0, -3:, :3].mean(axis=0), np.zeros(3))
-    planner._last = (x0, controls, start)  # noqa: SLF001 - the filter's memory of the last period
+    planner._last = (x0, controls)  # noqa: SLF001 - the filter's memory of the last period
     planner._update(x, wrench)  # noqa: SLF001
     assert x[2] > belief.face_z - 1e-4  # it stopped on the face
     assert h.weights[1] > 0.9  # from 0.5: the end over the hole would have dropped

@@ -162,9 +162,6 @@ class AlignStrategy(Strategy):
             ),
         }
 
-    def _motion_done(self, obs: Observation) -> str | None:
-        return "ok" if self.task.machine.motion_over(obs.t) else None
-
     def _tip_waypoint(self, tip: np.ndarray, q: np.ndarray) -> Waypoint:
         return Waypoint.of(self.task.pinch_for(tip, q), q, 0.0)
 

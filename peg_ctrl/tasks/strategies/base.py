@@ -196,6 +196,10 @@ class Strategy:
         """The strategy's rows of the phase table (``settle`` is the task's)."""
         raise NotImplementedError(f"{type(self).__name__} has no phase table")
 
+    def _motion_done(self, obs: Observation) -> str | None:
+        """A guard: ``ok`` once the phase's motion has played out."""
+        return "ok" if self.task.machine.motion_over(obs.t) else None
+
 
 @dataclasses.dataclass(frozen=True)
 class StrategyConfig:

@@ -67,9 +67,6 @@ class ForceStrategy(Strategy):
     def _enter_approach(self, obs: Observation) -> Motion:
         return approach_over_hole(self.task)
 
-    def _motion_done(self, obs: Observation) -> str | None:
-        return "ok" if self.task.machine.motion_over(obs.t) else None
-
     def _enter_descend(self, obs: Observation) -> Motion:
         t = self.task
         return t.move(seated_goal(t, self.cfg.seat_margin), slow(t, self.cfg.descent_speed))

@@ -53,10 +53,10 @@ class PlanStrategy(Strategy):
         t, c = self.task, self.cfg
         return {
             "approach": PhaseSpec(
-                self._enter_approach, self._approached, "plan", Timeout(2.0, True), tick=t.feel_free
+                self._enter_approach, self._motion_done, "plan", Timeout(2.0, True), tick=t.feel_free
             ),
             "plan": PhaseSpec(self._enter_plan, self._seated, "hold", Timeout(c.plan_time), tick=t.feel),
-            "hold": PhaseSpec(self._enter_hold, never, DONE, Timeout(c.hold_time), tick=t.feel),
+            "hold": PhaseSpec(self._hold, never, DONE, Timeout(c.hold_time), tick=t.feel),
         }
 
     def _enter_approach(self, obs: Observation) -> Motion:
@@ -64,9 +64,6 @@ class PlanStrategy(Strategy):
         q = np.asarray(t.goal.quat_world)
         target = np.array([*t.observed_hole, t.z_face + self.cfg.hover])
         return t.move(Waypoint.of(t.pinch_for(target, q), q, 0.0))
-
-    def _approached(self, obs: Observation) -> str | None:
-        return "ok" if self.task.machine.motion_over(obs.t) else None
 
     def _enter_plan(self, obs: Observation) -> Motion:
         t = self.task
@@ -76,9 +73,7 @@ class PlanStrategy(Strategy):
     def _seated(self, obs: Observation) -> str | None:
         return "seated" if self.task.seated_detected(obs) else None
 
-    def _enter_hold(self, obs: Observation) -> Motion:
-        return self._hold(obs)
-
     def _hold(self, obs: Observation) -> Motion:
+        """Still where the approach ended (a planning controller does not track it)."""
         g = self.task.goal
         return Hold(GripperTarget.trusted(g.p_world, g.quat_world, np.zeros(3), np.zeros(3), 0.0))

@@ -249,9 +249,6 @@ class ProbeStrategy(Strategy):
         }
 
     # -- helpers ------------------------------------------------------------------------------------
-    def _motion_done(self, obs: Observation) -> str | None:
-        return "ok" if self.task.machine.motion_over(obs.t) else None
-
     def tip_offset(self) -> _Vec:
         """The believed lower end from the pinch point, gripper frame [m]."""
         t = self.task
