@@ -38,6 +38,7 @@ from peg_ctrl.run.workers import worker_pool
 
 __all__ = [
     "run_sweep",
+    "run_jobs",
     "collect_rows",
     "refresh_tables",
     "bench_sweep",
@@ -77,11 +78,18 @@ def episode_columns() -> tuple[str, ...]:
 EPISODE_COLUMNS = episode_columns()
 
 
-def _run_one(args: tuple[str, dict[str, Any], str]) -> dict[str, Any]:
+# One episode for a worker: its key, its config as plain data, its directory, and the user's
+# files (PATH.py:ClassName) that register the controllers and strategies it names.
+_Task = tuple[str, dict[str, Any], str, tuple[str, ...]]
+
+
+def _run_one(args: _Task) -> dict[str, Any]:
     """Worker: one episode (the compiled model is cached per worker and scene)."""
     from peg_ctrl.run.episode import run_episode
+    from peg_ctrl.run.plugins import load_plugins
 
-    key, data, out = args
+    key, data, out, plugins = args
+    load_plugins(plugins)  # once per worker and file: a spawned worker has only the package's
     result = run_episode(job_config(data), Path(out), plot=False).to_dict()
     result["key"] = key
     return result
@@ -113,7 +121,7 @@ def bench_sweep(n_episodes: int = 6, *, workers: tuple[int, ...] = (1, 2)) -> di
     for n in workers:
         with tempfile.TemporaryDirectory() as tmp, worker_pool(n) as pool:
             list(pool.map(_warm_up, [job_config_mapping(jobs[0])] * n))
-            tasks = [(j.key, job_config_mapping(j), str(Path(tmp) / j.key)) for j in jobs]
+            tasks = [(j.key, job_config_mapping(j), str(Path(tmp) / j.key), ()) for j in jobs]
             t0 = time.perf_counter()
             results = list(pool.map(_run_one, tasks))
             times[n] = time.perf_counter() - t0
@@ -189,7 +197,7 @@ def check_same_experiment(out_dir: Path, exp: ExperimentConfig) -> None:
 _Stream = Generator[dict[str, Any], None, None]
 
 
-def _local_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int) -> _Stream:
+def _local_backend(tasks: list[_Task], workers: int) -> _Stream:
     # Closing this generator early (Ctrl-C, an error) ends the workers and starts no queued
     # episode; they also die with this process (peg_ctrl.run.workers).
     if not tasks:
@@ -200,7 +208,7 @@ def _local_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int) -
             yield fut.result()
 
 
-def _ray_backend(tasks: list[tuple[str, dict[str, Any], str]], workers: int, address: str | None) -> _Stream:
+def _ray_backend(tasks: list[_Task], workers: int, address: str | None) -> _Stream:
     try:
         import ray
     except ImportError:
@@ -231,60 +239,89 @@ def run_sweep(
     address: str | None = None,
     progress: bool = True,
     report: bool = True,
+    plugins: tuple[str, ...] = (),
 ) -> list[dict[str, Any]]:
     """Run (or resume) ``exp`` into ``out_dir``; returns one row per episode, in job order.
 
     ``out_dir`` is locked while the sweep runs (:func:`~peg_ctrl.io.lock_output_dir`). Ctrl-C
     (or any exception) cancels the episodes not started and ends the running ones, which run
-    again on resume; the finished episodes' tables are written either way.
+    again on resume; the finished episodes' tables are written either way. ``plugins``: the
+    user's files (``PATH.py:ClassName``, :mod:`peg_ctrl.run.plugins`) that register controllers
+    or strategies the experiment names; every worker loads them.
 
     Raises:
         OutputInUse: another process is running a sweep (or a run) in ``out_dir``.
         ConfigError: ``out_dir`` holds another experiment, or an argument is invalid.
     """
-    if backend not in BACKENDS:
-        raise UnknownComponent("backend", backend, BACKENDS)
-    if workers < 1:
-        raise ConfigError(f"workers must be >= 1, got {workers}")
+    _check_backend(backend, workers)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = expand(exp)  # before anything is written: a bad experiment leaves nothing behind
     with lock_output_dir(out_dir):
         remove_stale_temps(out_dir)  # left by a sweep killed while writing its tables or plots
-        return _sweep(exp, jobs, out_dir, workers, backend, address, progress=progress, report=report)
+        check_same_experiment(out_dir, exp)
+        atomic_write_text(out_dir / "experiment.json", experiment_text(exp))
+        try:
+            run_jobs(
+                jobs,
+                out_dir,
+                workers=workers,
+                backend=backend,
+                address=address,
+                plugins=plugins,
+                desc=f"sweep {exp.name}",
+                progress=progress,
+            )
+        finally:
+            # Whatever stopped the sweep (Ctrl-C, a crashed worker), the finished episodes'
+            # tables are written; the report only for a complete sweep.
+            rows = collect_rows(jobs, out_dir)
+            write_tables(rows, out_dir)
+        if report:
+            from peg_ctrl.experiments.report import write_report
+
+            write_report(out_dir)
+        return rows
 
 
-def _sweep(
-    exp: ExperimentConfig,
+def _check_backend(backend: str, workers: int) -> None:
+    if backend not in BACKENDS:
+        raise UnknownComponent("backend", backend, BACKENDS)
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
+
+
+def run_jobs(
     jobs: list[Job],
     out_dir: Path,
-    workers: int,
-    backend: str,
-    address: str | None,
     *,
-    progress: bool,
-    report: bool,
-) -> list[dict[str, Any]]:
-    """:func:`run_sweep` in the locked ``out_dir``."""
+    workers: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    plugins: tuple[str, ...] = (),
+    desc: str = "episodes",
+    progress: bool = True,
+) -> int:
+    """Run the ``jobs`` not finished in ``out_dir/episodes/<key>``, with a progress bar; the
+    time spent is added to ``out_dir``'s run time. The caller holds ``out_dir``'s lock. Returns
+    how many episodes ran."""
     from peg_ctrl.progress import progress_bar
 
-    check_same_experiment(out_dir, exp)
-    atomic_write_text(out_dir / "experiment.json", experiment_text(exp))
-    tasks = []
+    _check_backend(backend, workers)
+    tasks: list[_Task] = []
     wins = 0  # of the episodes done, before and now
     for job in jobs:
         summary = _finished(out_dir / "episodes" / job.key)
         if summary is None:
-            tasks.append((job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key)))
+            tasks.append((job.key, job_config_mapping(job), str(out_dir / "episodes" / job.key), plugins))
         else:
             wins += summary["status"] == "success"
-    done_before = len(jobs) - len(tasks)
     started = time.perf_counter()
     try:
         with progress_bar(
             total=len(jobs),
-            initial=done_before,
-            desc=f"sweep {exp.name}",
+            initial=len(jobs) - len(tasks),
+            desc=desc,
             unit="ep",
             enabled=progress,
             lines="episodes",
@@ -300,19 +337,11 @@ def _sweep(
                     bar.set_postfix_str(f"{wins} inserted", refresh=False)
                     bar.update(1)
     finally:
-        # Whatever stopped the sweep (Ctrl-C, a crashed worker), the finished episodes' tables
-        # are written; the report only for a complete sweep.
-        rows = collect_rows(jobs, out_dir)
-        write_tables(rows, out_dir)
         if tasks:  # a resumed sweep's run time is the sum over its invocations
             from peg_ctrl.experiments.report.run_time import add_run_time
 
             add_run_time(out_dir, time.perf_counter() - started)
-    if report:
-        from peg_ctrl.experiments.report import write_report
-
-        write_report(out_dir)
-    return rows
+    return len(tasks)
 
 
 def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:

@@ -343,9 +343,10 @@ class PairComparison:
         ]
 
 
-def compare_arms(rows: Sequence[dict[str, Any]] | Any) -> list[PairComparison]:
+def compare_arms(rows: Sequence[dict[str, Any]] | Any, *, against: str | None = None) -> list[PairComparison]:
     """Every pair of arms (``arm`` or ``controller``, + ``planner``, of episodes.csv rows or
-    their :func:`episodes_frame`) at each clearance, largest clearance first."""
+    their :func:`episodes_frame`) at each clearance, largest clearance first; with ``against``
+    (an arm), only that arm (as A) against each other one, the Holm family those pairs."""
     df = episodes_frame(rows)
     if df.empty:
         return []
@@ -363,7 +364,11 @@ def compare_arms(rows: Sequence[dict[str, Any]] | Any) -> list[PairComparison]:
             )
             for name, g in at.groupby("pair_arm", sort=False)
         }
-        pairs = [(a, b, arms[a], arms[b]) for a, b in itertools.combinations(arms, 2)]
+        if against is None:
+            pairs = [(a, b, arms[a], arms[b]) for a, b in itertools.combinations(arms, 2)]
+        else:
+            mine = [a for a in arms if a.rsplit("+", 1)[0] == against]
+            pairs = [(a, b, arms[a], arms[b]) for a in mine for b in arms if b not in mine]
         # One Holm family per metric and clearance.
         p_success = holm([success_test(x[0], x[1], y[0], y[1]) for _, _, x, y in pairs])
         p_force = holm([location_test(x[2], y[2]) for _, _, x, y in pairs])

@@ -22,6 +22,7 @@ from peg_ctrl.experiments.report.episodes_csv import episodes_csv_problem, read_
 from peg_ctrl.experiments.report.plots import draw_plots
 from peg_ctrl.experiments.report.run_time import run_time
 from peg_ctrl.experiments.report.sections import (
+    against_section,
     cell_section,
     comparison_section,
     cost_section,
@@ -61,8 +62,15 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         else {}
     )
     took = (elapsed_s, 1) if elapsed_s is not None else run_time(out_dir)
+    # A comparison of a new arm with a committed study (peg-sim compare) leads with that arm.
+    compared = out_dir / "compare.json"
+    against = []
+    if compared.is_file():
+        brought = json.loads(compared.read_text())
+        against = against_section(rows, brought["arm"], brought["study"])
     parts = [
         *header_section(exp, out_dir.name, rows, took),
+        *against,
         *summary_section(summary),
         *cell_section(rows),
         *comparison_section(rows),

@@ -19,6 +19,7 @@ from peg_ctrl.experiments.stats import (
     compared_time,
     episodes_frame,
     summary_columns,
+    wilson_interval,
 )
 from peg_ctrl.run.result import COST_FIELDS, summarised
 
@@ -27,6 +28,7 @@ __all__ = [
     "summary_section",
     "cell_section",
     "comparison_section",
+    "against_section",
     "phase_section",
     "cost_section",
     "plots_section",
@@ -77,6 +79,60 @@ def comparison_section(rows: list[dict[str, Any]]) -> list[str]:
             f"{_p(c.p_time)} | {', '.join(c.differs()) or 'no difference found'} |"
         )
     return [*lines, ""]
+
+
+def against_section(rows: list[dict[str, Any]], arm: str, study: str) -> list[str]:
+    """``arm`` (brought to a committed study by ``peg-sim compare``) against each of the study's
+    arms at each clearance: success with its Wilson interval, medians, and p-values Holm-corrected
+    over those pairs."""
+    pairs = compare_arms(rows, against=arm)
+    if not pairs:
+        return []
+    tasks = contact_tasks(episodes_frame(rows))
+    time_what = "first contact to seated" if tasks else "time to insert"
+    lines = [
+        f"## {arm} against {study}'s arms",
+        "",
+        f"The new arm's episodes ran here; the other arms' are {study}'s committed episodes (a "
+        "sample of each rerun and found identical, `compare.json`). Success: Wilson 95 % interval; "
+        f"p: Boschloo exact test (success), Mann-Whitney U (peak force; {time_what}, successes "
+        f"only), two-sided, Holm-corrected over the pairs with {arm} at that clearance; bold: "
+        f"p < {ALPHA}.",
+        "",
+        f"| clearance [mm] | arm | success | 95 % interval | peak force median [N] | {time_what} "
+        "median [s] | p success | p force | p time |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def row(clearance: float, name: str, k_n: str, force: float | None, time: float | None, ps: str) -> str:
+        k, n = (int(x) for x in k_n.split("/"))
+        lo, hi = wilson_interval(k, n)
+        return (
+            f"| {clearance * 1e3:g} | {name} | {k_n} ({k / n:.0%}) | {_interval(lo, hi, '{:.0%}')} | "
+            f"{_num(force, '{:.1f}')} | {_num(time, '{:.2f}')} | {ps} |"
+        )
+
+    for clearance in dict.fromkeys(c.clearance_m for c in pairs):
+        at = [c for c in pairs if c.clearance_m == clearance]
+        first = at[0]
+        lines.append(
+            row(
+                clearance,
+                f"**{first.arm_a}**",
+                first.success_a,
+                first.force_median_a,
+                first.time_median_a,
+                "| |",
+            )
+        )
+        for c in at:
+            ps = f"{_p(c.p_success)} | {_p(c.p_force)} | {_p(c.p_time)}"
+            lines.append(row(clearance, c.arm_b, c.success_b, c.force_median_b, c.time_median_b, ps))
+    return [*lines, ""]
+
+
+def _num(x: float | None, fmt: str) -> str:
+    return "–" if x is None else fmt.format(x)
 
 
 def cell_section(rows: list[dict[str, Any]]) -> list[str]:

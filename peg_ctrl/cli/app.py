@@ -28,7 +28,19 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from peg_ctrl.cli import bench, calibrate, model, plot, replay, run, sweep, teleop, validate_profile, validity
+from peg_ctrl.cli import (
+    bench,
+    calibrate,
+    compare,
+    model,
+    plot,
+    replay,
+    run,
+    sweep,
+    teleop,
+    validate_profile,
+    validity,
+)
 from peg_ctrl.cli.common import EXIT_INTERRUPTED, EXIT_USER_ERROR, Parser
 from peg_ctrl.errors import USER_ERRORS, DivergenceError, OutputWarning, PegCtrlError, PlanningError
 from peg_ctrl.progress import ENV_VAR
@@ -36,7 +48,7 @@ from peg_ctrl.progress import ENV_VAR
 __all__ = ["main"]
 
 # One module per command, each with register(sub) and run(args), in the order of --help.
-COMMANDS = (model, calibrate, bench, run, teleop, sweep, validity, validate_profile, replay, plot)
+COMMANDS = (model, calibrate, bench, run, teleop, sweep, compare, validity, validate_profile, replay, plot)
 
 
 def _is_user_error(exc: BaseException) -> bool:

@@ -146,7 +146,7 @@ def describe(size: SweepSize, est: Estimate, out: Path, workers: int) -> list[st
     if est.episodes == 0:
         lines.append("nothing to run: the sweep would only redraw its tables and report")
     else:
-        lines += _estimate_lines(est, out, workers)
+        lines += estimate_lines(est, out, workers)
     return [*lines, "dry run: nothing written"]
 
 
@@ -171,7 +171,7 @@ def _breakdown(size: SweepSize) -> list[str]:
     return lines
 
 
-def _estimate_lines(est: Estimate, out: Path, workers: int) -> list[str]:
+def estimate_lines(est: Estimate, out: Path, workers: int) -> list[str]:
     """The estimate, its parts (one per controller, task and profile) and its sources."""
     from peg_ctrl.experiments.estimate import EPISODE_OVERHEAD_S
 

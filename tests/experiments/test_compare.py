@@ -1,0 +1,212 @@
+"""``peg-sim compare``: a new arm against a committed study, the study's rows taken from its
+committed run after a rerun sample reproduces them; a user's controller file loaded in the
+sweep's (spawned) workers."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from peg_ctrl.cli.app import main
+from peg_ctrl.errors import ConfigError
+from peg_ctrl.experiments.compare import BaselineMismatch, plan_comparison, run_comparison
+from peg_ctrl.experiments.config import experiment_from_mapping
+from peg_ctrl.experiments.runner import run_sweep
+from peg_ctrl.run.plugins import load_plugin
+
+TINY = {"name": "tiny", "controllers": ["pd", "impedance"], "seeds": [0, 1], "max_steps": 300}
+
+USER_FILE = '''
+import dataclasses
+from typing import ClassVar
+
+from peg_ctrl.controllers import PDConfig
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MyConfig(PDConfig):
+    """The reference PD, a third softer."""
+
+    name: ClassVar[str] = "my_pd_{tag}"
+    kp_pos: float = {kp}
+
+
+NOT_A_CONFIG = 3
+'''
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A committed run as docs/ keeps one: the tables without the episodes' directories."""
+    out = tmp_path_factory.mktemp("study") / "tiny"
+    run_sweep(experiment_from_mapping(TINY), out, workers=1, progress=False, report=False)
+    shutil.rmtree(out / "episodes")
+    return out
+
+
+def user_file(folder: Path, tag: str) -> str:
+    """A controller in a file outside the package: ``PATH.py:MyConfig``, its name unique per test
+    (the registry lives as long as the test process)."""
+    path = folder / "my_ctrl.py"
+    path.write_text(textwrap.dedent(USER_FILE.format(tag=tag, kp=2000.0)))
+    return f"{path}:MyConfig"
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_only_the_new_arm_and_a_sample_run_the_rest_is_the_committed_run(study: Path, tmp_path: Path) -> None:
+    comp = plan_comparison(str(study), user_file(tmp_path, "a"), assignments=["controller.kd_pos=90"])
+    assert comp.arm == "my_pd_a" and comp.plugins and comp.controller["kd_pos"] == 90.0
+    assert {a: len(s) for a, s in comp.sample.items()} == {"pd": 1, "impedance": 1}
+    out = tmp_path / "out"
+    rows = run_comparison(comp, out, workers=1, progress=False)  # a spawned worker loads the file
+
+    ran = sorted(p.name for p in (out / "episodes").iterdir())
+    sample = sorted(j.key for s in comp.sample.values() for j in s)
+    assert ran == sorted([*sample, *(j.key for j in comp.new_jobs)])  # 2 new + 1 per study arm
+    assert [r["arm"] for r in rows] == ["pd", "pd", "impedance", "impedance", "my_pd_a", "my_pd_a"]
+    committed = {r["key"]: r for r in read_csv(study / "episodes.csv")}
+    table = read_csv(out / "episodes.csv")
+    for row in table[:4]:  # the study's rows are its committed rows, cell for cell
+        assert row == committed[row["key"]]
+    assert all(isinstance(r["peak_contact_force_n"], float) for r in rows)
+
+    record = json.loads((out / "compare.json").read_text())
+    assert record["verified"] == {
+        "pd": {"episodes": [comp.sample["pd"][0].key], "reproduced": True},
+        "impedance": {"episodes": [comp.sample["impedance"][0].key], "reproduced": True},
+    }
+    assert record["rerun"] == []
+    report = (out / "report.md").read_text()
+    assert "## my_pd_a against tiny's arms" in report
+    section = report.split("## my_pd_a against tiny's arms")[1].split("\n## ")[0]
+    table_rows = [line for line in section.splitlines() if line.startswith("| 1 |")]
+    assert [r.split("|")[2].strip() for r in table_rows] == [
+        "**my_pd_a+ruckig**",
+        "pd+ruckig",
+        "impedance+ruckig",
+    ]
+
+    # The same command resumes: nothing runs again.
+    again = run_comparison(
+        plan_comparison(str(study), comp.plugins[0], assignments=["controller.kd_pos=90"]),
+        out,
+        workers=1,
+        progress=False,
+    )
+    assert [r["key"] for r in again] == [r["key"] for r in rows]
+    other = plan_comparison(str(study), "pd", assignments=["controller.kp_pos=1500"])
+    with pytest.raises(ConfigError, match="holds another comparison"):
+        run_comparison(other, out, workers=1, progress=False)
+
+
+def test_a_committed_episode_that_no_longer_reproduces_stops_it_in_one_line(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    changed = tmp_path / "tiny"
+    shutil.copytree(study, changed)
+    comp = plan_comparison(str(changed), "pd", assignments=["controller.kp_pos=1500"])
+    victim = comp.sample["impedance"][0].key
+    rows = read_csv(changed / "episodes.csv")
+    for row in rows:
+        if row["key"] == victim:
+            row["peak_any_contact_force_n"] = str(float(row["peak_any_contact_force_n"]) * 1.001)
+    with open(changed / "episodes.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+    argv = [
+        "compare",
+        str(changed),
+        "--controller",
+        "pd",
+        "--set",
+        "controller.kp_pos=1500",
+        "--workers",
+        "1",
+    ]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    err = lines[-1]  # after the verification's progress lines
+    assert all(line.startswith("verify tiny:") for line in lines[:-1])
+    assert "committed impedance does not reproduce" in err and f"episode {victim}" in err
+    assert "peak_any_contact_force_n was" in err and "--rerun-baselines" in err
+
+    comp = plan_comparison(str(changed), "pd", assignments=["controller.kp_pos=1500"])
+    with pytest.raises(BaselineMismatch):
+        run_comparison(comp, tmp_path / "again", workers=1, progress=False, report=False)
+    # ... and the same directory takes the rerun (the failed verification's episode is reused).
+    rows = run_comparison(
+        comp, tmp_path / "again", workers=1, progress=False, rerun_baselines=True, report=False
+    )
+    record = json.loads((tmp_path / "again" / "compare.json").read_text())
+    assert record["rerun"] == ["impedance"] and record["verified"]["pd"]["reproduced"]
+    fresh = {r["key"]: r for r in rows}
+    tampered = {r["key"]: r for r in read_csv(changed / "episodes.csv")}
+    assert fresh[victim]["peak_any_contact_force_n"] != float(tampered[victim]["peak_any_contact_force_n"])
+    assert len(list((tmp_path / "again" / "episodes").iterdir())) == 1 + 2 + 2  # pd's sample, impedance, new
+
+
+def test_a_set_that_changes_what_the_study_ran_needs_rerun_baselines(study: Path, tmp_path: Path) -> None:
+    fewer = plan_comparison(str(study), "pd", assignments=["controller.kp_pos=1500", "seeds=[1]"])
+    assert [len(j) for j in fewer.study_jobs.values()] == [1, 1] and len(fewer.new_jobs) == 1
+    assert not fewer.missing
+    longer = plan_comparison(str(study), "pd", assignments=["controller.kp_pos=1500", "max_steps=200"])
+    assert longer.missing == {"pd": 2, "impedance": 2}
+    with pytest.raises(ConfigError, match=r"lacks 2 of pd's episodes .*--rerun-baselines"):
+        run_comparison(longer, tmp_path / "out", workers=1, progress=False)
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_input_is_one_line_naming_it(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec = user_file(tmp_path, "b")
+    path = spec.rpartition(":")[0]
+    cases = {
+        "no_such_study": "no such directory or committed study; committed:",
+        str(tmp_path): "holds no committed run (no experiment.json, episodes.csv)",
+    }
+    for what, message in cases.items():
+        assert main(["compare", what, "--controller", "pd", "--out", str(tmp_path / "o")]) == 2
+        assert message in capsys.readouterr().err
+    plugins = {
+        f"{tmp_path}/none.py:MyConfig": "there is no file",
+        f"{path}:Missing": "defines no Missing",
+        f"{path}:NOT_A_CONFIG": "is not a ControllerConfig or StrategyConfig subclass",
+    }
+    for value, message in plugins.items():
+        assert main(["compare", str(study), "--controller", value, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+    assert main(["compare", str(study), "--controller", "pd", "--out", str(tmp_path / "o")]) == 2
+    assert "runs the same episodes as tiny's arm pd" in capsys.readouterr().err
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise RuntimeError('oops')\n")
+    with pytest.raises(ConfigError, match="importing .*broken.py failed: RuntimeError: oops"):
+        load_plugin(f"{broken}:X")
+    with pytest.raises(ConfigError, match="is a controller config; a strategy config is needed"):
+        load_plugin(spec, "strategy")
+    assert not (tmp_path / "o").exists()
+
+
+def test_dry_run_counts_what_it_would_run(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["compare", str(study), "--controller", "pd", "--set", "controller.kp_pos=1500", "--dry-run"]
+    assert main([*argv, "--verify", "2", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "compare pd*/" not in out and "compare pd* against tiny" in out
+    assert "6 episodes to run" in out and "the new arm: 2 episodes" in out
+    assert "verification: 4 committed episodes rerun (2 study arms: pd, impedance)" in out
+    assert "estimated wall time" in out and out.rstrip().endswith("dry run: nothing written")
+    assert not (tmp_path / "o").exists()
