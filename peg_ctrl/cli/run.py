@@ -110,6 +110,7 @@ def _run_with_viewer(cfg: EpisodeConfig, out: Path) -> EpisodeResult:
     import mujoco.viewer
 
     from peg_ctrl.run.episode import run_episode
+    from peg_ctrl.sim.gl import before_gl_context
 
     handle: dict[str, object] = {}
     wall0 = time.perf_counter()
@@ -117,6 +118,7 @@ def _run_with_viewer(cfg: EpisodeConfig, out: Path) -> EpisodeResult:
     def sync(model, data) -> None:  # type: ignore[no-untyped-def]
         viewer = handle.get("viewer")
         if viewer is None:
+            before_gl_context()  # peg_ctrl.sim.gl
             viewer = mujoco.viewer.launch_passive(model, data)
             handle["viewer"] = viewer
         if not viewer.is_running():  # type: ignore[attr-defined]

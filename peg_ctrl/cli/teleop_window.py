@@ -85,6 +85,9 @@ class _Window:
     def __init__(self, session: TeleopSession, width: int, height: int) -> None:
         import glfw
 
+        from peg_ctrl.sim.gl import before_gl_context
+
+        before_gl_context()  # before GLFW's context (peg_ctrl.sim.gl)
         if not glfw.init():
             raise WindowUnavailable("GLFW could not initialise a window system (is DISPLAY set?)")
         self.handle = glfw.create_window(width, height, "peg_ctrl teleop", None, None)

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import importlib
-import importlib.util
 import math
 import os
 import struct
@@ -21,6 +19,7 @@ from peg_ctrl.commands import quat_to_euler
 from peg_ctrl.errors import ConfigError, OutputError
 from peg_ctrl.io import atomic_write_bytes, commit_temp, temp_path, write_error
 from peg_ctrl.run.episode_log import TRACE_COLUMNS, EpisodeLogger
+from peg_ctrl.sim.gl import before_gl_context
 from peg_ctrl.sim.scene import PINCH_SITE
 from peg_ctrl.sim.state import PAIRS
 
@@ -248,16 +247,10 @@ FOLLOW = "follow"
 
 
 def offscreen_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    """A ``mujoco.Renderer`` of ``height`` x ``width`` [px], with Triton imported first if it is
-    installed.
-
-    Triton (which the CUDA build of PyTorch imports when it builds a model, e.g. Stable-Baselines3's
-    policy) crashes the process (exit 139 inside ``libtriton``) when it is first imported after an
-    EGL context exists; imported before the context, it is safe. Without Triton this only creates
-    the renderer.
-    """
-    if importlib.util.find_spec("triton") is not None:
-        importlib.import_module("triton")
+    """A ``mujoco.Renderer`` of ``height`` x ``width`` [px], made after
+    :func:`~peg_ctrl.sim.gl.before_gl_context` (Triton, if installed, imported first: it crashes
+    the process when first imported after a GL context exists)."""
+    before_gl_context()
     return mujoco.Renderer(model, height, width)
 
 

@@ -3,7 +3,9 @@ actions, rewards and terminations, each by running the physics."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -98,6 +100,59 @@ def test_check_env_passes_with_every_render_mode_on_a_virtual_display() -> None:
         pytest.skip(f"Xvfb could not start: {proc.stderr.strip()[:200]}")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "CHECKED" in proc.stdout
+
+
+# The full install's crash (docs/rl.md): Triton, which the CUDA build of PyTorch brings,
+# segfaults the process when first imported after a GL context exists. The dev install brings the
+# real Triton (pyproject.toml), so these open the render modes in the orders a user meets.
+_FULL_INSTALL = """
+import importlib.util, sys
+import gymnasium as gym, peg_ctrl
+from gymnasium.utils.env_checker import check_env
+spec = importlib.util.find_spec("triton")
+print("TRITON", spec.origin if spec else None)
+order = sys.argv[1]
+if order == "check_env":  # the human viewer first, then rgb_array
+    check_env(gym.make("peg_ctrl/PegInsertion-v0").unwrapped)
+else:
+    modes = order.split(",")
+    envs = [gym.make("peg_ctrl/PegInsertion-v0", render_mode=m, width=64, height=48) for m in modes]
+    for env in envs:
+        env.reset(seed=0)
+        env.render()
+    from stable_baselines3 import PPO  # PyTorch builds a policy after the contexts exist
+    PPO("MultiInputPolicy", gym.make("peg_ctrl/PegInsertion-v0"), n_steps=8, batch_size=8, device="cpu")
+    for env in envs:
+        env.close()
+print("TRITON_LOADED", "triton" in sys.modules)
+print("CHECKED")
+"""
+
+
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="xvfb-run is not installed")
+@pytest.mark.skipif(
+    not (sys.platform.startswith("linux") and platform.machine() == "x86_64"),
+    reason="Triton ships for Linux x86_64 only",
+)
+@pytest.mark.parametrize("order", ["check_env", "human,rgb_array", "rgb_array,human"])
+def test_the_full_install_renders_in_any_order_with_the_real_triton(order: str) -> None:
+    """With the real Triton installed, every order of render modes (and a policy built after
+    them) runs to the end (without Triton imported before the human viewer, check_env exits 139)."""
+    spec = importlib.util.find_spec("triton")
+    assert spec is not None and spec.origin, "the dev install brings triton: pip install -e '.[dev]'"
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MUJOCO_GL")}  # as a user's
+    proc = subprocess.run(
+        ["xvfb-run", "-a", sys.executable, "-W", "ignore", "-c", _FULL_INSTALL, order],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    if "could not start" in proc.stderr.lower() or "xvfb failed" in proc.stderr.lower():
+        pytest.skip(f"Xvfb could not start: {proc.stderr.strip()[:200]}")
+    assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-1500:]}"
+    assert f"TRITON {spec.origin}" in proc.stdout  # the real package, not a stand-in
+    assert "TRITON_LOADED True" in proc.stdout and "CHECKED" in proc.stdout
 
 
 def test_human_mode_without_a_display_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
