@@ -19,7 +19,7 @@ GIT_STATUS := { git status --porcelain --untracked-files=all 2>/dev/null || true
 # Top-level paths the wheel is built from (pyproject.toml [tool.setuptools]).
 PKG_SOURCES := pyproject.toml README.md peg_ctrl controllers planners experiments
 
-.PHONY: install demo sysdeps sysdeps-test apt test test-slow lint bench model calibrate clean
+.PHONY: install demo readme-figure sysdeps sysdeps-test apt test test-slow lint bench model calibrate clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,12 @@ demo: $(STAMP) sysdeps
 	$(BIN)/peg-sim run --randomize --seed 0 --video --out $(OUT)
 	$(BIN)/peg-sim run --config docs/demo/held_insertion.yaml --out $(OUT)/held_insertion
 	$(BIN)/peg-sim bench --controller pd --task default --out $(OUT)/bench.json --repeats 3 --throughput-episodes 0
+
+## readme-figure: the README's picture made anew: the demo's held insertion, then its frame
+## halfway in beside its force profile (peg-sim replay --figure)
+readme-figure: $(STAMP) sysdeps
+	$(BIN)/peg-sim run --config docs/demo/held_insertion.yaml --out $(OUT)/held_insertion
+	$(BIN)/peg-sim replay $(OUT)/held_insertion --figure docs/insertion.png
 
 ## sysdeps: EGL/Mesa for offscreen rendering, installed only if missing (Debian, needs root)
 sysdeps:

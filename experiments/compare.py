@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import time
 from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
@@ -40,6 +41,7 @@ from peg_ctrl.experiments.config import (
     experiment_from_mapping,
 )
 from peg_ctrl.experiments.report import read_rows
+from peg_ctrl.experiments.report.run_time import add_run_time
 from peg_ctrl.experiments.runner import collect_rows, run_jobs, write_tables
 from peg_ctrl.io import atomic_write_text, lock_output_dir, remove_stale_temps, to_json
 from peg_ctrl.run.plugins import is_plugin, load_plugin
@@ -59,8 +61,9 @@ __all__ = [
 STUDY_FILES = ("experiment.json", "episodes.csv")
 #: Appended to the new controller's label when a study's controller has its name.
 NEW_ARM_MARK = "*"
-# Columns a rerun is not compared in: measured in wall time, or where the episode was written.
-_NOT_COMPARED = frozenset({*WALL_CLOCK_FIELDS, "log_path"})
+# Columns a rerun is not compared in: measured in wall time, or naming the episode (its key, its
+# log) rather than saying what happened in it.
+_NOT_COMPARED = frozenset({*WALL_CLOCK_FIELDS, "key", "log_path"})
 # Two recorded numbers are the same within this (their CSV text round-trips a float exactly; the
 # margin absorbs a last-bit difference of another machine's maths library, nothing more).
 _REL_TOL, _ABS_TOL = 1e-9, 1e-12
@@ -104,7 +107,8 @@ def find_study(study: str) -> Path:
     if study in known:
         return known[study]
     raise ConfigError(
-        f"study {study!r}: no such directory or committed study; committed: {', '.join(known) or '(none)'}"
+        f"study {study!r}: no such directory or committed study; committed: {', '.join(known) or '(none)'} "
+        "(the committed studies are docs/<study>/ in the repository: run from its root, or give the path)"
     )
 
 
@@ -122,7 +126,7 @@ class Comparison:
     experiment: dict[str, Any]  # the study's experiment after --set
     new_jobs: tuple[Job, ...]
     study_jobs: dict[str, tuple[Job, ...]]  # study arm -> its episodes the comparison needs
-    committed: dict[str, dict[str, str]]  # key -> the committed row (values as text)
+    committed: dict[str, dict[str, str]]  # a study job's key -> its committed row (values as text)
     sample: dict[str, tuple[Job, ...]]  # study arm -> the episodes rerun to verify it
 
     @property
@@ -208,7 +212,7 @@ def plan_comparison(
 
     study_jobs, new_jobs = _jobs(name, study_exp, new_exp)
     arm = new_jobs[0].arm
-    committed = {row["key"]: row for row in read_rows(study_dir)}
+    committed = _match_committed(study_dir, study_jobs)
     sample = {
         a: tuple(sorted((j for j in jobs if j.key in committed), key=lambda j: j.key)[:verify])
         for a, jobs in study_jobs.items()
@@ -251,6 +255,45 @@ def _jobs(
             f"the new arm {new_jobs[0].arm} runs the same episodes as {name}'s arm {same}: nothing to compare"
         )
     return {a: tuple(jobs) for a, jobs in study_jobs.items()}, new_jobs
+
+
+def _match_committed(study_dir: Path, study_jobs: dict[str, tuple[Job, ...]]) -> dict[str, dict[str, str]]:
+    """Each study job's committed row, by the job's key: the row of the same arm, planner,
+    clearance, seed and grid cell, when the committed experiment ran that episode with the same
+    config (a ``--set`` of the seeds or a grid key keeps it; one of the physics or a task field
+    does not). Matched by what the episode is rather than by its key, since a key leaves out the
+    fields at their defaults: a default changed since the study ran changes the key, not the
+    episode (the committed ``experiment.json`` holds every field's value)."""
+    committed = expand(experiment_from_mapping(json.loads((study_dir / "experiment.json").read_text())))
+    axes = sorted(committed[0].cell) if committed else []
+    ran = {_identity(j, axes): to_dict(j.config) for j in committed}
+    rows = {}
+    for row in read_rows(study_dir):
+        cell = tuple((k, row.get(k, "")) for k in axes)
+        rows[(row["arm"], row["planner"], row["clearance_m"], row["seed"], cell)] = row
+    found = {}
+    for jobs in study_jobs.values():
+        for job in jobs:
+            ident = _identity(job, axes)
+            row = rows.get(ident)
+            if row is not None and ran.get(ident) == to_dict(job.config):
+                found[job.key] = row
+    return found
+
+
+def _identity(job: Job, axes: list[str]) -> tuple[Any, ...]:
+    """What a job is within its study, as ``episodes.csv`` writes it: arm, planner, clearance,
+    seed and its value on each of the study's grid ``axes`` (its config's, for an axis a
+    ``--set`` fixed)."""
+    config = to_dict(job.config)
+    cell = tuple((k, _text(job.cell[k] if k in job.cell else _dig(config, k))) for k in axes)
+    return (job.arm, job.planner, _text(job.clearance), _text(job.seed), cell)
+
+
+def _dig(data: Any, key: str) -> Any:
+    for part in key.split("."):
+        data = data.get(part) if isinstance(data, dict) else None
+    return data
 
 
 def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, Any], ExperimentConfig]:
@@ -324,19 +367,33 @@ def run_comparison(
         experiment = {**comp.experiment, "name": f"{comp.study}+{comp.arm.split('/')[0]}"}
         atomic_write_text(out_dir / "experiment.json", to_json(experiment, indent=2) + "\n")
         rerun = set(comp.missing)
+        started, ran = time.perf_counter(), [0]
 
         def run(jobs: list[Job], desc: str) -> None:
-            run_jobs(jobs, out_dir, workers=workers, plugins=comp.plugins, desc=desc, progress=progress)
+            ran[0] += len(jobs)  # (those finished before are skipped, and cost next to nothing)
+            run_jobs(
+                jobs,
+                out_dir,
+                workers=workers,
+                plugins=comp.plugins,
+                desc=desc,
+                progress=progress,
+                record_time=False,  # one invocation: the verification and the new arm together
+            )
 
-        run([j for a, s in comp.sample.items() if a not in rerun for j in s], f"verify {comp.study}")
-        verified = _verify(comp, out_dir, rerun, rerun_baselines)
-        _write_record(out_dir, comp, verified, rerun)
-        rerun_jobs = [j for a in comp.study_jobs if a in rerun for j in comp.study_jobs[a]]
         try:
-            run([*rerun_jobs, *comp.new_jobs], f"compare {comp.arm}")
+            run([j for a, s in comp.sample.items() if a not in rerun for j in s], f"verify {comp.study}")
+            verified = _verify(comp, out_dir, rerun, rerun_baselines)  # no tables unless it passes
+            _write_record(out_dir, comp, verified, rerun)
+            rerun_jobs = [j for a in comp.study_jobs if a in rerun for j in comp.study_jobs[a]]
+            try:
+                run([*rerun_jobs, *comp.new_jobs], f"compare {comp.arm}")
+            finally:
+                rows = _rows(comp, out_dir, rerun)
+                write_tables(rows, out_dir)
         finally:
-            rows = _rows(comp, out_dir, rerun)
-            write_tables(rows, out_dir)
+            if ran[0]:
+                add_run_time(out_dir, time.perf_counter() - started)
         if report:
             from peg_ctrl.experiments.report import write_report
 

@@ -301,10 +301,11 @@ def run_jobs(
     plugins: tuple[str, ...] = (),
     desc: str = "episodes",
     progress: bool = True,
+    record_time: bool = True,
 ) -> int:
     """Run the ``jobs`` not finished in ``out_dir/episodes/<key>``, with a progress bar; the
-    time spent is added to ``out_dir``'s run time. The caller holds ``out_dir``'s lock. Returns
-    how many episodes ran."""
+    time spent is added to ``out_dir``'s run time as an invocation (unless not ``record_time``:
+    the caller adds it). The caller holds ``out_dir``'s lock. Returns how many episodes ran."""
     from peg_ctrl.progress import progress_bar
 
     _check_backend(backend, workers)
@@ -337,7 +338,7 @@ def run_jobs(
                     bar.set_postfix_str(f"{wins} inserted", refresh=False)
                     bar.update(1)
     finally:
-        if tasks:  # a resumed sweep's run time is the sum over its invocations
+        if tasks and record_time:  # a resumed sweep's run time is the sum over its invocations
             from peg_ctrl.experiments.report.run_time import add_run_time
 
             add_run_time(out_dir, time.perf_counter() - started)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-PAGES = ("api.md", "rl.md", "sensing.md")
+PAGES = ("../README.md", "api.md", "rl.md", "sensing.md")
 _BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -21,7 +21,7 @@ def _examples() -> list[tuple[str, str]]:
         text = (DOCS / page).read_text(encoding="utf-8")
         for i, match in enumerate(_BLOCK.finditer(text)):
             line = text.count("\n", 0, match.start()) + 1
-            found.append((f"{page}:{line}", match.group(1)))
+            found.append((f"{Path(page).name}:{line}", match.group(1)))
             assert i < 50
     return found
 
@@ -125,3 +125,34 @@ def test_the_held_insertion_config_reproduces_its_sweep_episode(tmp_path: Path) 
             assert value == float(expected), name
         else:
             assert ("" if value is None else str(value)) == expected, name
+
+
+# -- links ----------------------------------------------------------------------------------------
+
+_LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+
+
+def _anchors(page: Path) -> set[str]:
+    """GitHub's anchors of a Markdown page's headings."""
+    found = set()
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("#"):
+            title = line.lstrip("#").strip().lower()
+            found.add(re.sub(r"[^\w\- ]", "", title).replace(" ", "-"))
+    return found
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/guide.md", "docs/api.md"])
+def test_every_relative_link_resolves(page: str) -> None:
+    path = ROOT / page
+    broken = []
+    for target in _LINK.findall(path.read_text(encoding="utf-8")):
+        if re.match(r"^(https?:|mailto:)", target):
+            continue
+        file, _, anchor = target.partition("#")
+        resolved = (path.parent / file) if file else path
+        if not resolved.exists():
+            broken.append(target)
+        elif anchor and resolved.suffix == ".md" and anchor not in _anchors(resolved):
+            broken.append(target)
+    assert broken == []

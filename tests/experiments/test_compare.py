@@ -210,3 +210,30 @@ def test_dry_run_counts_what_it_would_run(
     assert "verification: 4 committed episodes rerun (2 study arms: pd, impedance)" in out
     assert "estimated wall time" in out and out.rstrip().endswith("dry run: nothing written")
     assert not (tmp_path / "o").exists()
+
+
+def test_committed_rows_are_matched_by_what_the_episode_is_not_by_its_key(
+    study: Path, tmp_path: Path
+) -> None:
+    """A key leaves out the fields at their defaults, so a default changed since the study ran
+    changes its episodes' keys; the committed experiment.json pins every field, so the rows still
+    are those episodes."""
+    changed = tmp_path / "tiny"
+    shutil.copytree(study, changed)
+    rows = read_csv(changed / "episodes.csv")
+    for i, row in enumerate(rows):
+        row["key"] = f"{i:016x}"  # keys computed under other defaults
+    with open(changed / "episodes.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    comp = plan_comparison(str(changed), "pd", assignments=["controller.kp_pos=1500"])
+    assert not comp.missing and len(comp.committed) == 4
+    assert {r["seed"] for r in comp.committed.values()} == {"0", "1"}
+    pd_row = comp.committed[comp.study_jobs["pd"][1].key]
+    assert (pd_row["arm"], pd_row["seed"]) == ("pd", "1")
+    # ... and an episode under another physics than the study's is not one of its episodes.
+    other = plan_comparison(
+        str(changed), "pd", assignments=["controller.kp_pos=1500", "physics.profile=precision"]
+    )
+    assert other.missing == {"pd": 2, "impedance": 2}

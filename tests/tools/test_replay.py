@@ -12,6 +12,7 @@ from peg_ctrl.cli import main
 from peg_ctrl.config import ConfigError
 from peg_ctrl.progress import ENV_VAR
 from peg_ctrl.run.episode import EpisodeConfig, run_episode
+from peg_ctrl.tools.figure import figure_time, insertion_figure
 from peg_ctrl.tools.replay import REPLAY_FPS, extract_frames, frame_times, replay
 
 # The recorded run renders every frame (as the replays do): kept short.
@@ -129,3 +130,33 @@ def test_the_viewer_needs_a_display(run: Path, monkeypatch: pytest.MonkeyPatch, 
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["replay", str(run), "--viewer"]) == 2
     assert "the replay viewer needs a display (DISPLAY is not set)" in capsys.readouterr().err
+
+
+def test_figure_time_is_halfway_in_else_the_peak_force_else_the_end() -> None:
+    t = np.linspace(0.0, 1.0, 11)
+    force = np.array([0, 0, 1, 5, 2, 1, 1, 1, 1, 1, 1], dtype=float)
+    depth = np.array([20, 0, 0, 0, 1, 2, 4, 6, 8, 10, 10], dtype=float) * 1e-3  # on the table first
+    assert figure_time(t, force, depth) == pytest.approx(0.7)  # first at >= 5 mm after the touch
+    assert figure_time(t, force, depth * 0.1) == pytest.approx(0.3)  # 1 mm deep: the peak force
+    assert figure_time(t, np.zeros(11), depth) == pytest.approx(1.0)  # never touched: the end
+
+
+def test_the_figure_shows_the_frame_beside_the_force_profile(run: Path, tmp_path: Path, capsys) -> None:
+    from PIL import Image
+
+    out = tmp_path / "figure.png"
+    assert main(["replay", str(run), "--figure", str(out), "--at", "0.1"]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {out} (the frame at 0.10 s)"
+    image = np.asarray(Image.open(out).convert("RGB"))
+    assert image.shape == (396, 1320, 3)  # 12 x 3.6 in at 110 dpi
+    assert image[:, : image.shape[1] // 2].std() > 20.0  # a rendered scene on the left
+    path, when = insertion_figure(run, tmp_path / "default.png")
+    assert when == pytest.approx(DURATION, abs=0.002)  # no contact: the last recorded state
+    bad = {
+        ("--at", "0.1"): "--at is the moment of --figure",
+        ("--figure", str(out), "--at", "5"): "--at 5 s is outside the episode",
+        ("--figure", str(out), "--video", str(tmp_path / "v.mp4")): "not with --video or --viewer",
+    }
+    for argv, message in bad.items():
+        assert main(["replay", str(run), *argv]) == 2
+        assert message in capsys.readouterr().err
