@@ -275,9 +275,9 @@ def _match_committed(study_dir: Path, study_jobs: dict[str, tuple[Job, ...]]) ->
     for jobs in study_jobs.values():
         for job in jobs:
             ident = _identity(job, axes)
-            row = rows.get(ident)
-            if row is not None and ran.get(ident) == to_dict(job.config):
-                found[job.key] = row
+            match = rows.get(ident)
+            if match is not None and ran.get(ident) == to_dict(job.config):
+                found[job.key] = match
     return found
 
 
