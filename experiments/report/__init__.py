@@ -55,19 +55,19 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
     out_dir = Path(out_dir)
     rows = read_rows(out_dir)
     summary = summarise(rows)
-    plots = draw_plots(out_dir, rows) if rows else []
+    # A comparison of a new arm with a committed study (peg-sim compare) leads with that arm,
+    # and only its episodes' force traces are drawn (of the study's arms, a sample ran here).
+    compared = out_dir / "compare.json"
+    brought = json.loads(compared.read_text()) if compared.is_file() else None
+    traced = [brought["arm"]] if brought else None
+    plots = draw_plots(out_dir, rows, traced_arms=traced) if rows else []
     exp = (
         json.loads((out_dir / "experiment.json").read_text())
         if (out_dir / "experiment.json").is_file()
         else {}
     )
     took = (elapsed_s, 1) if elapsed_s is not None else run_time(out_dir)
-    # A comparison of a new arm with a committed study (peg-sim compare) leads with that arm.
-    compared = out_dir / "compare.json"
-    against = []
-    if compared.is_file():
-        brought = json.loads(compared.read_text())
-        against = against_section(rows, brought["arm"], brought["study"])
+    against = against_section(rows, brought["arm"], brought["study"]) if brought else []
     parts = [
         *header_section(exp, out_dir.name, rows, took),
         *against,

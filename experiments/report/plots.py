@@ -48,17 +48,23 @@ def caption(name: str, rows: list[dict[str, Any]]) -> str:
     return _CAPTIONS.get(name, "").format(start=start)
 
 
-def draw_plots(out_dir: Path, rows: list[dict[str, Any]]) -> list[tuple[str, str]]:
-    """Draw the report's plots into ``out_dir``; returns (title, file name) of each one drawn."""
+def draw_plots(
+    out_dir: Path, rows: list[dict[str, Any]], *, traced_arms: list[str] | None = None
+) -> list[tuple[str, str]]:
+    """Draw the report's plots into ``out_dir``; returns (title, file name) of each one drawn.
+    ``traced_arms``: the arms whose force traces are drawn (default every arm; a comparison's
+    new arm, whose episodes alone ran in full, ``peg-sim compare``)."""
     pyplot()  # the headless backend, before any figure
 
     df = episodes_frame(rows)
     df["won"] = df["status"] == "success"
     arms = list(dict.fromkeys(df["arm"]))
     made: list[tuple[str, str]] = []
-    traced = has_traces(out_dir, df)
+    shown = arms if traced_arms is None else [a for a in arms if a in traced_arms]
+    df_traced = df[df["arm"].isin(shown)]
+    traced = bool(shown) and has_traces(out_dir, df_traced)
     if traced:
-        made.append(force_profiles(out_dir, df, arms))
+        made.append(force_profiles(out_dir, df_traced, shown))
     conditions = swept_conditions(df)
     if "clearance_m" in conditions:
         made.append(
@@ -69,8 +75,8 @@ def draw_plots(out_dir: Path, rows: list[dict[str, Any]]) -> list[tuple[str, str
         made.append(_success_curves(out_dir, df, arms, others, "success_vs_disturbance.png"))
     made.append(_peak_force(out_dir, df, arms))
     made.append(_outcomes(out_dir, df, arms))
-    if traced and inserts_from_contact(df).any():
-        made.append(force_vs_depth(out_dir, df, arms))
+    if traced and inserts_from_contact(df_traced).any():
+        made.append(force_vs_depth(out_dir, df_traced, shown))
     return made
 
 

@@ -49,7 +49,7 @@ def force_profiles(out_dir: Path, df: Any, arms: list[str]) -> tuple[str, str]:
     fig, axes = plt.subplots(
         nrows,
         ncols,
-        figsize=(3.4 * ncols + 0.6, 2.5 * nrows + 0.8),
+        figsize=(max(3.4 * ncols + 0.6, 7.0), 2.5 * nrows + 0.8),  # wide enough for the axis label
         dpi=110,
         sharex=True,
         sharey=True,

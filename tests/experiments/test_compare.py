@@ -87,6 +87,7 @@ def test_only_the_new_arm_and_a_sample_run_the_rest_is_the_committed_run(study: 
     assert record["rerun"] == []
     report = (out / "report.md").read_text()
     assert "## my_pd_a against tiny's arms" in report
+    assert "![Force profiles](force_profiles.png)" in report  # the new arm's alone
     section = report.split("## my_pd_a against tiny's arms")[1].split("\n## ")[0]
     table_rows = [line for line in section.splitlines() if line.startswith("| 1 |")]
     assert [r.split("|")[2].strip() for r in table_rows] == [
