@@ -366,39 +366,48 @@ def run_comparison(
         _write_record(out_dir, comp, {}, set())  # first: a stopped comparison resumes as one
         experiment = {**comp.experiment, "name": f"{comp.study}+{comp.arm.split('/')[0]}"}
         atomic_write_text(out_dir / "experiment.json", to_json(experiment, indent=2) + "\n")
-        rerun = set(comp.missing)
-        started, ran = time.perf_counter(), [0]
-
-        def run(jobs: list[Job], desc: str) -> None:
-            ran[0] += len(jobs)  # (those finished before are skipped, and cost next to nothing)
-            run_jobs(
-                jobs,
-                out_dir,
-                workers=workers,
-                plugins=comp.plugins,
-                desc=desc,
-                progress=progress,
-                record_time=False,  # one invocation: the verification and the new arm together
-            )
-
-        try:
-            run([j for a, s in comp.sample.items() if a not in rerun for j in s], f"verify {comp.study}")
-            verified = _verify(comp, out_dir, rerun, rerun_baselines)  # no tables unless it passes
-            _write_record(out_dir, comp, verified, rerun)
-            rerun_jobs = [j for a in comp.study_jobs if a in rerun for j in comp.study_jobs[a]]
-            try:
-                run([*rerun_jobs, *comp.new_jobs], f"compare {comp.arm}")
-            finally:
-                rows = _rows(comp, out_dir, rerun)
-                write_tables(rows, out_dir)
-        finally:
-            if ran[0]:
-                add_run_time(out_dir, time.perf_counter() - started)
+        rows = _run_locked(comp, out_dir, workers, rerun_baselines, progress)
         if report:
             from peg_ctrl.experiments.report import write_report
 
             write_report(out_dir)
         return rows
+
+
+def _run_locked(
+    comp: Comparison, out_dir: Path, workers: int, rerun_baselines: bool, progress: bool
+) -> list[dict[str, Any]]:
+    """:func:`run_comparison`'s episodes and tables, in the locked ``out_dir``: the
+    verification sample, then (once it passes) the arms to rerun and the new arm."""
+    rerun = set(comp.missing)
+    started, ran = time.perf_counter(), [0]
+
+    def run(jobs: list[Job], desc: str) -> None:
+        ran[0] += len(jobs)  # (those finished before are skipped, and cost next to nothing)
+        run_jobs(
+            jobs,
+            out_dir,
+            workers=workers,
+            plugins=comp.plugins,
+            desc=desc,
+            progress=progress,
+            record_time=False,  # one invocation: the verification and the new arm together
+        )
+
+    try:
+        run([j for a, s in comp.sample.items() if a not in rerun for j in s], f"verify {comp.study}")
+        verified = _verify(comp, out_dir, rerun, rerun_baselines)  # no tables unless it passes
+        _write_record(out_dir, comp, verified, rerun)
+        rerun_jobs = [j for a in comp.study_jobs if a in rerun for j in comp.study_jobs[a]]
+        try:
+            run([*rerun_jobs, *comp.new_jobs], f"compare {comp.arm}")
+        finally:
+            rows = _rows(comp, out_dir, rerun)
+            write_tables(rows, out_dir)
+    finally:
+        if ran[0]:
+            add_run_time(out_dir, time.perf_counter() - started)
+    return rows
 
 
 def _verify(comp: Comparison, out_dir: Path, rerun: set[str], rerun_baselines: bool) -> dict[str, Any]:

@@ -107,10 +107,8 @@ def _run_with_viewer(cfg: EpisodeConfig, out: Path) -> EpisodeResult:
     """The episode in a passive MuJoCo viewer, paced to real time; closing the window ends it."""
     import time
 
-    import mujoco.viewer
-
     from peg_ctrl.run.episode import run_episode
-    from peg_ctrl.sim.gl import before_gl_context
+    from peg_ctrl.sim.gl import PassiveViewer
 
     handle: dict[str, object] = {}
     wall0 = time.perf_counter()
@@ -118,8 +116,7 @@ def _run_with_viewer(cfg: EpisodeConfig, out: Path) -> EpisodeResult:
     def sync(model, data) -> None:  # type: ignore[no-untyped-def]
         viewer = handle.get("viewer")
         if viewer is None:
-            before_gl_context()  # peg_ctrl.sim.gl
-            viewer = mujoco.viewer.launch_passive(model, data)
+            viewer = PassiveViewer(model, data)  # Triton first, a close that waits (peg_ctrl.sim.gl)
             handle["viewer"] = viewer
         if not viewer.is_running():  # type: ignore[attr-defined]
             raise KeyboardInterrupt

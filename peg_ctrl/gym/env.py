@@ -133,7 +133,7 @@ from peg_ctrl.gym.agent_task import AgentTask
 from peg_ctrl.run.episode import DomainConfig, EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.run.loop import Loop, StepInfo
 from peg_ctrl.run.recorders import FollowCamera, offscreen_renderer
-from peg_ctrl.sim.gl import before_gl_context
+from peg_ctrl.sim.gl import PassiveViewer
 from peg_ctrl.sim.state import BLOCK_PEG, ft_world
 
 __all__ = [
@@ -401,10 +401,7 @@ class PegInsertionEnv(gymnasium.Env[dict[str, Any], NDArray[Any]]):
 
     def _render_human(self) -> None:
         if self._viewer is None:
-            import mujoco.viewer
-
-            before_gl_context()  # whatever render mode opens next (peg_ctrl.sim.gl)
-            self._viewer = mujoco.viewer.launch_passive(self.model, self.data)
+            self._viewer = PassiveViewer(self.model, self.data)  # Triton first (peg_ctrl.sim.gl)
         if self._viewer.is_running():
             self._viewer.sync()
             lag = self.data.time - (time.perf_counter() - self._wall0)
