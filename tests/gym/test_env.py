@@ -87,10 +87,19 @@ def test_check_env_passes_with_every_render_mode_on_a_virtual_display() -> None:
         print("CHECKED")
         """
     )
-    env = {**os.environ, "MUJOCO_GL": "egl"}
-    env.pop("DISPLAY", None)
+    proc = _on_a_virtual_display(script, mujoco_gl="egl")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "CHECKED" in proc.stdout
+
+
+def _on_a_virtual_display(script: str, *args: str, mujoco_gl: str | None) -> subprocess.CompletedProcess[str]:
+    """``python -c script args`` under ``xvfb-run`` (``MUJOCO_GL`` set, or unset as a user's
+    usually is); skips the test when Xvfb cannot start."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MUJOCO_GL")}
+    if mujoco_gl is not None:
+        env["MUJOCO_GL"] = mujoco_gl
     proc = subprocess.run(
-        ["xvfb-run", "-a", sys.executable, "-W", "ignore", "-c", script],
+        ["xvfb-run", "-a", sys.executable, "-W", "ignore", "-c", script, *args],
         capture_output=True,
         text=True,
         timeout=300,
@@ -98,8 +107,7 @@ def test_check_env_passes_with_every_render_mode_on_a_virtual_display() -> None:
     )
     if "could not start" in proc.stderr.lower() or "xvfb failed" in proc.stderr.lower():
         pytest.skip(f"Xvfb could not start: {proc.stderr.strip()[:200]}")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "CHECKED" in proc.stdout
+    return proc
 
 
 # The full install's crash (docs/rl.md): Triton, which the CUDA build of PyTorch brings,
@@ -140,16 +148,7 @@ def test_the_full_install_renders_in_any_order_with_the_real_triton(order: str) 
     them) runs to the end (without Triton imported before the human viewer, check_env exits 139)."""
     spec = importlib.util.find_spec("triton")
     assert spec is not None and spec.origin, "the dev install brings triton: pip install -e '.[dev]'"
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MUJOCO_GL")}  # as a user's
-    proc = subprocess.run(
-        ["xvfb-run", "-a", sys.executable, "-W", "ignore", "-c", _FULL_INSTALL, order],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=env,
-    )
-    if "could not start" in proc.stderr.lower() or "xvfb failed" in proc.stderr.lower():
-        pytest.skip(f"Xvfb could not start: {proc.stderr.strip()[:200]}")
+    proc = _on_a_virtual_display(_FULL_INSTALL, order, mujoco_gl=None)
     assert proc.returncode == 0, f"exit {proc.returncode}: {proc.stderr[-1500:]}"
     assert f"TRITON {spec.origin}" in proc.stdout  # the real package, not a stand-in
     assert "TRITON_LOADED True" in proc.stdout and "CHECKED" in proc.stdout
