@@ -238,3 +238,37 @@ def test_committed_rows_are_matched_by_what_the_episode_is_not_by_its_key(
         str(changed), "pd", assignments=["controller.kp_pos=1500", "physics.profile=precision"]
     )
     assert other.missing == {"pd": 2, "impedance": 2}
+
+
+STRATEGY_FILE = """
+import dataclasses
+from typing import ClassVar
+
+from peg_ctrl.tasks.strategies import StraightConfig
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MyStraight(StraightConfig):
+    name: ClassVar[str] = "my_straight"
+"""
+
+
+def test_a_strategy_from_a_users_file_runs_in_the_workers(tmp_path: Path) -> None:
+    held = tmp_path / "held"
+    exp = {
+        "name": "held",
+        "controllers": ["pd"],
+        "strategies": ["straight"],
+        "task": {"name": "held_insertion"},
+        "seeds": [0],
+        "max_steps": 200,
+    }
+    run_sweep(experiment_from_mapping(exp), held, workers=1, progress=False, report=False)
+    (tmp_path / "mine.py").write_text(STRATEGY_FILE)
+    with pytest.raises(ConfigError, match="--strategy is needed: study held crosses strategies"):
+        plan_comparison(str(held), "impedance")
+    comp = plan_comparison(str(held), "impedance", f"{tmp_path / 'mine.py'}:MyStraight")
+    assert comp.arm == "impedance/my_straight" and comp.strategy == {"name": "my_straight", **comp.strategy}
+    rows = run_comparison(comp, tmp_path / "out", workers=1, progress=False, report=False)
+    assert [r["arm"] for r in rows] == ["pd/straight", "impedance/my_straight"]
+    assert rows[1]["strategy"] == "my_straight" and rows[1]["total_timesteps"] == 200
