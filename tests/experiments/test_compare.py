@@ -8,6 +8,7 @@ import csv
 import json
 import shutil
 import textwrap
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -38,6 +39,21 @@ class MyConfig(PDConfig):
 
 NOT_A_CONFIG = 3
 '''
+
+
+@pytest.fixture(autouse=True)
+def _registries_restored() -> Iterator[None]:
+    """What a test's plugins register stays in it (the registries live as long as the process,
+    and other modules' tests list them)."""
+    from peg_ctrl.controllers import REGISTRY
+    from peg_ctrl.run import plugins
+    from peg_ctrl.tasks.strategies import STRATEGIES
+
+    saved = [(registry, dict(registry)) for registry in (REGISTRY, STRATEGIES, plugins._LOADED)]
+    yield
+    for registry, before in saved:
+        registry.clear()
+        registry.update(before)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
