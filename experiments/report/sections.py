@@ -112,22 +112,21 @@ def against_section(rows: list[dict[str, Any]], arm: str, study: str) -> list[st
             f"{_num(force, '{:.1f}')} | {_num(time, '{:.2f}')} | {ps} |"
         )
 
+    # Arms are arm+planner: the planner is left out when every arm has the same one.
+    one_planner = len({n.rsplit("+", 1)[-1] for c in pairs for n in (c.arm_a, c.arm_b)}) == 1
+
+    def name(arm_planner: str) -> str:
+        return arm_planner.rsplit("+", 1)[0] if one_planner else arm_planner
+
     for clearance in dict.fromkeys(c.clearance_m for c in pairs):
         at = [c for c in pairs if c.clearance_m == clearance]
-        first = at[0]
+        a = at[0]
         lines.append(
-            row(
-                clearance,
-                f"**{first.arm_a}**",
-                first.success_a,
-                first.force_median_a,
-                first.time_median_a,
-                "| |",
-            )
+            row(clearance, f"**{name(a.arm_a)}**", a.success_a, a.force_median_a, a.time_median_a, "| |")
         )
         for c in at:
             ps = f"{_p(c.p_success)} | {_p(c.p_force)} | {_p(c.p_time)}"
-            lines.append(row(clearance, c.arm_b, c.success_b, c.force_median_b, c.time_median_b, ps))
+            lines.append(row(clearance, name(c.arm_b), c.success_b, c.force_median_b, c.time_median_b, ps))
     return [*lines, ""]
 
 

@@ -107,9 +107,9 @@ def test_only_the_new_arm_and_a_sample_run_the_rest_is_the_committed_run(study: 
     section = report.split("## my_pd_a against tiny's arms")[1].split("\n## ")[0]
     table_rows = [line for line in section.splitlines() if line.startswith("| 1 |")]
     assert [r.split("|")[2].strip() for r in table_rows] == [
-        "**my_pd_a+ruckig**",
-        "pd+ruckig",
-        "impedance+ruckig",
+        "**my_pd_a**",
+        "pd",
+        "impedance",
     ]
 
     # The same command resumes: nothing runs again.
