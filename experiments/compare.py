@@ -183,7 +183,8 @@ def plan_comparison(
 
     Args:
         study: a committed study's name or a run's directory (:func:`find_study`).
-        controller: a registered controller name or ``PATH.py:ClassName`` (a config in a file).
+        controller: a registered controller name (the study's controller of that name brings its
+            fields) or ``PATH.py:ClassName`` (a config in a file).
         strategy: the same for the strategy; needed when the study crosses strategies. A study
             strategy of that name brings its fields.
         assignments: ``--set KEY=VALUE``: ``controller.<field>`` and ``strategy.<field>`` set the
@@ -199,11 +200,9 @@ def plan_comparison(
     ctrl_sets, strat_sets, exp_sets = _split_assignments(list(assignments or []))
     name, data, study_exp = _study_experiment(study_dir, exp_sets)
     plugins: list[str] = []
-    ctrl_spec = apply_overrides(
-        {"controller": {"name": _component(controller, "controller", plugins)}}, ctrl_sets
-    )
+    ctrl_spec = _controller_spec(study_exp, controller, ctrl_sets, plugins)
     strategy_spec = _strategy_spec(study_exp, strategy, strat_sets, plugins)
-    new_data = {**data, "controllers": [ctrl_spec["controller"]], "arms": {}}
+    new_data = {**data, "controllers": [ctrl_spec], "arms": {}}
     new_data["strategies"] = [strategy_spec] if strategy_spec is not None else []
     try:
         new_exp = experiment_from_mapping(new_data)
@@ -305,6 +304,18 @@ def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, 
         return name, data, experiment_from_mapping(data)
     except ConfigError as exc:
         raise ConfigError(f"study {name} (after --set): {exc}") from None
+
+
+def _controller_spec(
+    exp: ExperimentConfig, controller: str, sets: list[str], plugins: list[str]
+) -> dict[str, Any]:
+    """The new arm's controller as plain data: the study's controller of that name when it has
+    exactly one (its fields), else the registered one's defaults, then ``controller.*`` ``--set``s."""
+    name = _component(controller, "controller", plugins)
+    theirs = [to_dict(c) for c in exp.controllers if c.name == name]
+    return dict(
+        apply_overrides({"controller": theirs[0] if len(theirs) == 1 else {"name": name}}, sets)["controller"]
+    )
 
 
 def _strategy_spec(

@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--controller",
         required=True,
         metavar="C",
-        help="a registered controller name, or PATH.py:ClassName (a ControllerConfig subclass in your "
+        help="a registered controller name (a study controller of that name brings its fields: change "
+        "them with --set controller.<field>), or PATH.py:ClassName (a ControllerConfig subclass in your "
         "file; registered for the run and in its workers)",
     )
     p.add_argument(

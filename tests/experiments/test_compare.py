@@ -273,7 +273,7 @@ def test_a_strategy_from_a_users_file_runs_in_the_workers(tmp_path: Path) -> Non
     held = tmp_path / "held"
     exp = {
         "name": "held",
-        "controllers": ["pd"],
+        "controllers": [{"name": "pd", "kp_pos": 2500.0}],
         "strategies": ["straight"],
         "task": {"name": "held_insertion"},
         "seeds": [0],
@@ -281,6 +281,11 @@ def test_a_strategy_from_a_users_file_runs_in_the_workers(tmp_path: Path) -> Non
     }
     run_sweep(experiment_from_mapping(exp), held, workers=1, progress=False, report=False)
     (tmp_path / "mine.py").write_text(STRATEGY_FILE)
+    # A study controller of the name brings its fields; --set changes them.
+    mine = plan_comparison(str(held), "pd", "straight", ["controller.kd_pos=50"])
+    assert (mine.arm, mine.controller["kp_pos"], mine.controller["kd_pos"]) == ("pd*/straight", 2500.0, 50.0)
+    with pytest.raises(ConfigError, match="runs the same episodes as held's arm pd/straight"):
+        plan_comparison(str(held), "pd", "straight")
     with pytest.raises(ConfigError, match="--strategy is needed: study held crosses strategies"):
         plan_comparison(str(held), "impedance")
     comp = plan_comparison(str(held), "impedance", f"{tmp_path / 'mine.py'}:MyStraight")
