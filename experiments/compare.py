@@ -303,7 +303,12 @@ def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, 
     try:
         return name, data, experiment_from_mapping(data)
     except ConfigError as exc:
-        raise ConfigError(f"study {name} (after --set): {exc}") from None
+        if sets:
+            raise ConfigError(f"study {name} (after --set): {exc}") from None
+        raise ConfigError(
+            f"study {name}: its committed experiment.json does not load on this code ({exc}): the run "
+            f"predates a change of the configs; rerun it (peg-sim sweep {name}) to compare with it"
+        ) from None
 
 
 def _controller_spec(
