@@ -139,13 +139,22 @@ class Comparison:
         """What ``compare.json`` says was compared (a resumed comparison must match it)."""
         return {
             "study": self.study,
-            "study_dir": str(self.study_dir),
+            "study_dir": _shown(self.study_dir),
             "arm": self.arm,
             "controller": self.controller,
             "strategy": self.strategy,
             "plugins": list(self.plugins),
             "set": list(self.assignments),
         }
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the working directory when it is under it (a record to commit names
+    no machine's folders), else as it is."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _split_assignments(assignments: list[str]) -> tuple[list[str], list[str], list[str]]:
@@ -451,8 +460,9 @@ def _write_record(out_dir: Path, comp: Comparison, verified: dict[str, Any], rer
 def _check_same_comparison(out_dir: Path, comp: Comparison) -> None:
     path = out_dir / "compare.json"
     if path.is_file():
-        before = {k: v for k, v in json.loads(path.read_text()).items() if k in comp.record()}
-        if before != json.loads(to_json(comp.record())):
+        mine = {k: v for k, v in json.loads(to_json(comp.record())).items() if k != "study_dir"}
+        before = {k: v for k, v in json.loads(path.read_text()).items() if k in mine}
+        if before != mine:
             raise ConfigError(
                 f"{out_dir} holds another comparison ({before.get('arm')} against {before.get('study')}); "
                 "choose another --out"
