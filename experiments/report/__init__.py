@@ -74,7 +74,8 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         *summary_section(summary),
         *cell_section(rows),
         *comparison_section(rows),
-        *phase_section(out_dir, rows),
+        # the phases are read from the episodes' logs: of a comparison's study arms only a sample ran here
+        *phase_section(out_dir, rows if traced is None else [r for r in rows if arm_of(r) in traced]),
         *cost_section(rows),
         *plots_section(rows, plots),
     ]
