@@ -42,7 +42,7 @@ from peg_ctrl.experiments.config import (
 )
 from peg_ctrl.experiments.report import read_rows
 from peg_ctrl.experiments.report.run_time import add_run_time
-from peg_ctrl.experiments.runner import collect_rows, run_jobs, write_tables
+from peg_ctrl.experiments.runner import collect_rows, run_jobs, unfinished, write_tables
 from peg_ctrl.io import atomic_write_text, lock_output_dir, remove_stale_temps, to_json
 from peg_ctrl.run.plugins import is_plugin, load_plugin
 from peg_ctrl.run.result import WALL_CLOCK_FIELDS
@@ -408,7 +408,7 @@ def _run_locked(
     started, ran = time.perf_counter(), [0]
 
     def run(jobs: list[Job], desc: str) -> None:
-        ran[0] += len(jobs)  # (those finished before are skipped, and cost next to nothing)
+        ran[0] += len(unfinished(jobs, out_dir))  # a resumed comparison with nothing left adds no time
         run_jobs(
             jobs,
             out_dir,

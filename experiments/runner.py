@@ -39,6 +39,7 @@ from peg_ctrl.run.workers import worker_pool
 __all__ = [
     "run_sweep",
     "run_jobs",
+    "unfinished",
     "collect_rows",
     "refresh_tables",
     "bench_sweep",
@@ -289,6 +290,11 @@ def _check_backend(backend: str, workers: int) -> None:
         raise UnknownComponent("backend", backend, BACKENDS)
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
+
+
+def unfinished(jobs: list[Job], out_dir: Path) -> list[Job]:
+    """The ``jobs`` whose episode in ``out_dir/episodes/<key>`` has not finished."""
+    return [job for job in jobs if _finished(out_dir / "episodes" / job.key) is None]
 
 
 def run_jobs(

@@ -120,6 +120,7 @@ def test_only_the_new_arm_and_a_sample_run_the_rest_is_the_committed_run(study: 
         progress=False,
     )
     assert [r["key"] for r in again] == [r["key"] for r in rows]
+    assert json.loads((out / "run_time.json").read_text())["invocations"] == 1  # nothing ran again
     other = plan_comparison(str(study), "pd", assignments=["controller.kp_pos=1500"])
     with pytest.raises(ConfigError, match="holds another comparison"):
         run_comparison(other, out, workers=1, progress=False)
