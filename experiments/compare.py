@@ -42,7 +42,7 @@ from peg_ctrl.experiments.config import (
 )
 from peg_ctrl.experiments.report import read_rows
 from peg_ctrl.experiments.report.run_time import add_run_time
-from peg_ctrl.experiments.runner import collect_rows, run_jobs, unfinished, write_tables
+from peg_ctrl.experiments.runner import collect_rows, episode_columns, run_jobs, unfinished, write_tables
 from peg_ctrl.io import atomic_write_text, lock_output_dir, remove_stale_temps, to_json
 from peg_ctrl.run.plugins import is_plugin, load_plugin
 from peg_ctrl.run.result import WALL_CLOCK_FIELDS
@@ -266,42 +266,35 @@ def _jobs(
 
 
 def _match_committed(study_dir: Path, study_jobs: dict[str, tuple[Job, ...]]) -> dict[str, dict[str, str]]:
-    """Each study job's committed row, by the job's key: the row of the same arm, planner,
-    clearance, seed and grid cell, when the committed experiment ran that episode with the same
-    config (a ``--set`` of the seeds or a grid key keeps it; one of the physics or a task field
-    does not). Matched by what the episode is rather than by its key, since a key leaves out the
-    fields at their defaults: a default changed since the study ran changes the key, not the
-    episode (the committed ``experiment.json`` holds every field's value)."""
+    """Each study job's committed row, by the job's key: the row of the committed job with the
+    same arm and the same config (a ``--set`` of the seeds or a grid key keeps it; one of the
+    physics or a task field does not). Matched by what the episode is rather than by its key,
+    since a key leaves out the fields at their defaults: a default changed since the study ran
+    changes the key, not the episode (the committed ``experiment.json`` holds every field's
+    value). A committed job finds its row by what ``episodes.csv`` wrote of it: arm, planner,
+    clearance, seed and its grid values, as text."""
     committed = expand(experiment_from_mapping(json.loads((study_dir / "experiment.json").read_text())))
-    axes = sorted(committed[0].cell) if committed else []
-    ran = {_identity(j, axes): to_dict(j.config) for j in committed}
     rows = {}
     for row in read_rows(study_dir):
-        cell = tuple((k, row.get(k, "")) for k in axes)
+        cell = tuple((k, row.get(k, "")) for k in sorted(committed[0].cell)) if committed else ()
         rows[(row["arm"], row["planner"], row["clearance_m"], row["seed"], cell)] = row
+    by_config = {}
+    for job in committed:
+        cell = tuple((k, _text(v)) for k, v in sorted(job.cell.items()))
+        written = rows.get((job.arm, job.planner, _text(job.clearance), _text(job.seed), cell))
+        if written is not None:
+            by_config[(job.arm, _json(job.config))] = written
     found = {}
     for jobs in study_jobs.values():
         for job in jobs:
-            ident = _identity(job, axes)
-            match = rows.get(ident)
-            if match is not None and ran.get(ident) == to_dict(job.config):
+            match = by_config.get((job.arm, _json(job.config)))
+            if match is not None:
                 found[job.key] = match
     return found
 
 
-def _identity(job: Job, axes: list[str]) -> tuple[Any, ...]:
-    """What a job is within its study, as ``episodes.csv`` writes it: arm, planner, clearance,
-    seed and its value on each of the study's grid ``axes`` (its config's, for an axis a
-    ``--set`` fixed)."""
-    config = to_dict(job.config)
-    cell = tuple((k, _text(job.cell[k] if k in job.cell else _dig(config, k))) for k in axes)
-    return (job.arm, job.planner, _text(job.clearance), _text(job.seed), cell)
-
-
-def _dig(data: Any, key: str) -> Any:
-    for part in key.split("."):
-        data = data.get(part) if isinstance(data, dict) else None
-    return data
+def _json(config: Any) -> str:
+    return json.dumps(to_dict(config), sort_keys=True)
 
 
 def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, Any], ExperimentConfig]:
@@ -519,6 +512,9 @@ def _rows(comp: Comparison, out_dir: Path, rerun: set[str]) -> list[dict[str, An
     templates = [*ran, *(collect_rows([j for s in comp.sample.values() for j in s], out_dir))]
     parse = _parsers(templates)
     by_key = {row["key"]: row for row in ran}
+    # Every row with the columns of this code and this grid: a committed row may lack a column
+    # added since, or keep one removed since, or that of an axis a --set fixed.
+    names = [*episode_columns(), *comp.new_jobs[0].cell]
     rows = []
     for a, jobs in comp.study_jobs.items():
         for job in jobs:
@@ -526,7 +522,8 @@ def _rows(comp: Comparison, out_dir: Path, rerun: set[str]) -> list[dict[str, An
                 if job.key in by_key:
                     rows.append(by_key[job.key])
             else:
-                rows.append({k: parse.get(k, _guess)(v) for k, v in comp.committed[job.key].items()})
+                row = comp.committed[job.key]
+                rows.append({k: parse.get(k, _guess)(row.get(k, "")) for k in names})
     return rows + [by_key[j.key] for j in comp.new_jobs if j.key in by_key]
 
 
@@ -544,9 +541,9 @@ def _parsers(rows: list[dict[str, Any]]) -> dict[str, Callable[[str], Any]]:
                 return None
             if kind is bool:
                 return text == "True"
-            if kind is int:
-                return int(float(text))
-            return float(text) if kind is float else text
+            if kind is int and text.lstrip("-").isdigit():
+                return int(text)
+            return float(text) if kind in (int, float) else text
 
         return read
 

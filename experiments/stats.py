@@ -346,7 +346,8 @@ class PairComparison:
 def compare_arms(rows: Sequence[dict[str, Any]] | Any, *, against: str | None = None) -> list[PairComparison]:
     """Every pair of arms (``arm`` or ``controller``, + ``planner``, of episodes.csv rows or
     their :func:`episodes_frame`) at each clearance, largest clearance first; with ``against``
-    (an arm), only that arm (as A) against each other one, the Holm family those pairs."""
+    (an arm), only that arm (as A) against each other one with the same planner, the Holm family
+    those pairs."""
     df = episodes_frame(rows)
     if df.empty:
         return []
@@ -367,8 +368,14 @@ def compare_arms(rows: Sequence[dict[str, Any]] | Any, *, against: str | None = 
         if against is None:
             pairs = [(a, b, arms[a], arms[b]) for a, b in itertools.combinations(arms, 2)]
         else:
+            # ... each of its planners against the other arms with the same planner.
             mine = [a for a in arms if a.rsplit("+", 1)[0] == against]
-            pairs = [(a, b, arms[a], arms[b]) for a in mine for b in arms if b not in mine]
+            pairs = [
+                (a, b, arms[a], arms[b])
+                for a in mine
+                for b in arms
+                if b not in mine and b.rsplit("+", 1)[1] == a.rsplit("+", 1)[1]
+            ]
         # One Holm family per metric and clearance.
         p_success = holm([success_test(x[0], x[1], y[0], y[1]) for _, _, x, y in pairs])
         p_force = holm([location_test(x[2], y[2]) for _, _, x, y in pairs])

@@ -67,7 +67,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         else {}
     )
     took = (elapsed_s, 1) if elapsed_s is not None else run_time(out_dir)
-    against = against_section(rows, brought["arm"], brought["study"]) if brought else []
+    against = against_section(rows, brought["arm"], brought["study"], brought.get("rerun")) if brought else []
     parts = [
         *header_section(exp, out_dir.name, rows, took),
         *against,

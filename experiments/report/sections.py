@@ -81,23 +81,29 @@ def comparison_section(rows: list[dict[str, Any]]) -> list[str]:
     return [*lines, ""]
 
 
-def against_section(rows: list[dict[str, Any]], arm: str, study: str) -> list[str]:
+def against_section(
+    rows: list[dict[str, Any]], arm: str, study: str, rerun: list[str] | None = None
+) -> list[str]:
     """``arm`` (brought to a committed study by ``peg-sim compare``) against each of the study's
-    arms at each clearance: success with its Wilson interval, medians, and p-values Holm-corrected
-    over those pairs."""
+    arms at each clearance and planner: success with its Wilson interval, medians, and p-values
+    Holm-corrected over those pairs; ``rerun``: the study arms rerun in full."""
     pairs = compare_arms(rows, against=arm)
     if not pairs:
         return []
     tasks = contact_tasks(episodes_frame(rows))
     time_what = "first contact to seated" if tasks else "time to insert"
+    source = (
+        f"The new arm's episodes ran here; the other arms' are {study}'s committed episodes (a sample "
+        "of each rerun and found identical, `compare.json`)"
+    )
+    if rerun:
+        source += f", except {', '.join(rerun)}: rerun here in full (not reproduced, or missing)"
     lines = [
         f"## {arm} against {study}'s arms",
         "",
-        f"The new arm's episodes ran here; the other arms' are {study}'s committed episodes (a "
-        "sample of each rerun and found identical, `compare.json`). Success: Wilson 95 % interval; "
-        f"p: Boschloo exact test (success), Mann-Whitney U (peak force; {time_what}, successes "
-        f"only), two-sided, Holm-corrected over the pairs with {arm} at that clearance; bold: "
-        f"p < {ALPHA}.",
+        f"{source}. Success: Wilson 95 % interval; p: Boschloo exact test (success), Mann-Whitney U "
+        f"(peak force; {time_what}, successes only), two-sided, Holm-corrected over the pairs with "
+        f"{arm} at that clearance and planner; bold: p < {ALPHA}.",
         "",
         f"| clearance [mm] | arm | success | 95 % interval | peak force median [N] | {time_what} "
         "median [s] | p success | p force | p time |",
@@ -120,13 +126,17 @@ def against_section(rows: list[dict[str, Any]], arm: str, study: str) -> list[st
 
     for clearance in dict.fromkeys(c.clearance_m for c in pairs):
         at = [c for c in pairs if c.clearance_m == clearance]
-        a = at[0]
-        lines.append(
-            row(clearance, f"**{name(a.arm_a)}**", a.success_a, a.force_median_a, a.time_median_a, "| |")
-        )
-        for c in at:
-            ps = f"{_p(c.p_success)} | {_p(c.p_force)} | {_p(c.p_time)}"
-            lines.append(row(clearance, name(c.arm_b), c.success_b, c.force_median_b, c.time_median_b, ps))
+        for mine in dict.fromkeys(c.arm_a for c in at):  # one block per planner of the new arm
+            block = [c for c in at if c.arm_a == mine]
+            a = block[0]
+            lines.append(
+                row(clearance, f"**{name(mine)}**", a.success_a, a.force_median_a, a.time_median_a, "| |")
+            )
+            for c in block:
+                ps = f"{_p(c.p_success)} | {_p(c.p_force)} | {_p(c.p_time)}"
+                lines.append(
+                    row(clearance, name(c.arm_b), c.success_b, c.force_median_b, c.time_median_b, ps)
+                )
     return [*lines, ""]
 
 

@@ -15,6 +15,7 @@ import hashlib
 import importlib.util
 import sys
 from pathlib import Path
+from typing import Any
 
 from peg_ctrl.controllers import ControllerConfig, register_controller
 from peg_ctrl.errors import ConfigError
@@ -95,6 +96,28 @@ def _import(path: Path, cls_name: str, spec: str) -> Plugin:
     # A module name of its own per file: two users' my_ctrl.py never collide, nor shadow ours.
     digest = hashlib.sha1(str(path).encode()).hexdigest()[:10]
     module_name = f"peg_ctrl_plugin_{path.stem}_{digest}"
+    module = sys.modules.get(module_name)  # a file naming two classes is imported once
+    if module is None:
+        module = _exec(path, module_name, spec)
+    cls = getattr(module, cls_name, None)
+    if cls is None:
+        raise ConfigError(f"plugin {spec!r}: {path} defines no {cls_name}")
+    for kind, base in KINDS.items():
+        if isinstance(cls, type) and issubclass(cls, base):
+            if "name" not in vars(cls):
+                raise ConfigError(
+                    f"plugin {spec!r}: {cls_name} has no name of its own (set name: ClassVar[str] = "
+                    "'...' on the class)"
+                )
+            return Plugin(f"{path}:{cls_name}", kind, cls)
+    raise ConfigError(
+        f"plugin {spec!r}: {cls_name} is not a ControllerConfig or StrategyConfig subclass "
+        "(a config class naming a controller or a strategy)"
+    )
+
+
+def _exec(path: Path, module_name: str, spec: str) -> Any:
+    """Import ``path`` as the module ``module_name``."""
     module_spec = importlib.util.spec_from_file_location(module_name, path)
     if module_spec is None or module_spec.loader is None:
         raise ConfigError(f"plugin {spec!r}: {path} cannot be imported as a Python module")
@@ -107,13 +130,4 @@ def _import(path: Path, cls_name: str, spec: str) -> Plugin:
         raise ConfigError(
             f"plugin {spec!r}: importing {path} failed: {type(exc).__name__}: {' '.join(str(exc).split())}"
         ) from exc
-    cls = getattr(module, cls_name, None)
-    if cls is None:
-        raise ConfigError(f"plugin {spec!r}: {path} defines no {cls_name}")
-    for kind, base in KINDS.items():
-        if isinstance(cls, type) and issubclass(cls, base):
-            return Plugin(f"{path}:{cls_name}", kind, cls)
-    raise ConfigError(
-        f"plugin {spec!r}: {cls_name} is not a ControllerConfig or StrategyConfig subclass "
-        "(a config class naming a controller or a strategy)"
-    )
+    return module

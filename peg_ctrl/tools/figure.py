@@ -11,6 +11,7 @@ episode's end when it never touched the block. The README's picture is made this
 from __future__ import annotations
 
 import os
+import zipfile
 from pathlib import Path
 
 import mujoco
@@ -56,7 +57,12 @@ def insertion_figure(
     model, t_states, qpos = load_run(run_dir)
     if not any((Path(run_dir) / name).is_file() for name in ("forces.npz", "forces.partial")):
         raise ConfigError(f"run directory {str(run_dir)!r} has no forces.npz (its force trace)")
-    trace = read_trace(Path(run_dir))
+    try:
+        trace = read_trace(Path(run_dir))
+    except (ValueError, KeyError, OSError, zipfile.BadZipFile) as exc:
+        raise ConfigError(f"the force trace of {str(run_dir)!r} cannot be read: {exc}") from None
+    if trace.ndim != 2 or len(trace) == 0:
+        raise ConfigError(f"the force trace of {str(run_dir)!r} holds no sample")
     t, force = trace[:, 0], trace[:, TRACE_COLUMNS.index(_FORCE)]
     depth = trace[:, TRACE_COLUMNS.index(_DEPTH)]
     when = figure_time(t, force, depth) if at is None else float(at)

@@ -174,12 +174,13 @@ def _render_video(
 def _replay_in_viewer(
     model: mujoco.MjModel, t: NDArray[np.float64], qpos: NDArray[np.float64], speed: float
 ) -> None:
-    import mujoco.viewer
+    from peg_ctrl.sim.gl import PassiveViewer
 
     data = mujoco.MjData(model)
     # The viewer refreshes at about 60 Hz; a state per refresh is enough.
     times = frame_times(t, fps=60.0, speed=speed)
-    with mujoco.viewer.launch_passive(model, data) as handle:
+    handle = PassiveViewer(model, data)  # Triton first, a close that waits (peg_ctrl.sim.gl)
+    try:
         wall0 = time.perf_counter()
         for k, i in enumerate(_state_index(t, times)):
             if not handle.is_running():
@@ -191,6 +192,8 @@ def _replay_in_viewer(
             lag = (times[k] - times[0]) / speed - (time.perf_counter() - wall0)
             if lag > 0:
                 time.sleep(lag)
+    finally:
+        handle.close()
 
 
 def extract_frames(

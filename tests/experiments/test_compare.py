@@ -294,3 +294,48 @@ def test_a_strategy_from_a_users_file_runs_in_the_workers(tmp_path: Path) -> Non
     rows = run_comparison(comp, tmp_path / "out", workers=1, progress=False, report=False)
     assert [r["arm"] for r in rows] == ["pd/straight", "impedance/my_straight"]
     assert rows[1]["strategy"] == "my_straight" and rows[1]["total_timesteps"] == 200
+
+
+def test_a_set_that_fixes_a_grid_axis_keeps_the_match_and_writes_the_tables(tmp_path: Path) -> None:
+    """The committed rows keep the fixed axis's column (the new arm's do not), and a level the
+    file wrote as an integer (1) is the config's float (1.0)."""
+    grid = tmp_path / "grid"
+    exp = {
+        "name": "grid",
+        "controllers": ["pd"],
+        "seeds": [0],
+        "max_steps": 100,
+        "grid": {"scene.friction": [1, 0.5]},
+    }
+    run_sweep(experiment_from_mapping(exp), grid, workers=1, progress=False, report=False)
+    comp = plan_comparison(str(grid), "pd", assignments=["controller.kp_pos=1500", "scene.friction=1"])
+    assert not comp.missing and [len(j) for j in comp.study_jobs.values()] == [1]
+    rows = run_comparison(comp, tmp_path / "out", workers=1, progress=False)
+    assert [r["arm"] for r in rows] == ["pd", "pd*"]
+    assert "scene.friction" not in read_csv(tmp_path / "out" / "episodes.csv")[0]  # fixed: not a column
+    assert "## pd* against grid's arms" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_the_new_arm_meets_each_study_arm_with_the_same_planner() -> None:
+    from peg_ctrl.experiments.report.sections import against_section
+
+    rows = [
+        {
+            "arm": arm,
+            "controller": arm,
+            "planner": planner,
+            "clearance_m": "0.001",
+            "status": "success" if i % 2 else "failure",
+            "reason": "",
+            "peak_contact_force_n": str(1.0 + i),
+            "time_to_insert_s": str(2.0 + i),
+            "strategy": "",
+        }
+        for arm in ("new", "base")
+        for planner in ("ruckig", "toppra")
+        for i in range(4)
+    ]
+    lines = against_section(rows, "new", "study", rerun=["base"])
+    table = [line.split("|")[2].strip() for line in lines if line.startswith("| 1 |")]
+    assert table == ["**new+ruckig**", "base+ruckig", "**new+toppra**", "base+toppra"]
+    assert "except base: rerun here in full" in lines[2]
