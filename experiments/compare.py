@@ -135,6 +135,14 @@ class Comparison:
         found = {arm: sum(j.key not in self.committed for j in jobs) for arm, jobs in self.study_jobs.items()}
         return {arm: n for arm, n in found.items() if n}
 
+    def sample_jobs(self, rerun: set[str]) -> list[Job]:
+        """The verification sample of the study arms not in ``rerun``."""
+        return [j for a, jobs in self.sample.items() if a not in rerun for j in jobs]
+
+    def rerun_jobs(self, rerun: set[str]) -> list[Job]:
+        """Every episode of the study arms in ``rerun``, in the study's order."""
+        return [j for a, jobs in self.study_jobs.items() if a in rerun for j in jobs]
+
     def record(self) -> dict[str, Any]:
         """What ``compare.json`` says was compared (a resumed comparison must match it)."""
         return {
@@ -346,9 +354,7 @@ def _strategy_spec(
 
 def jobs_to_run(comp: Comparison, rerun: set[str]) -> list[Job]:
     """The verification sample, the study arms in ``rerun`` and the new arm, in that order."""
-    jobs = [j for a, s in comp.sample.items() if a not in rerun for j in s]
-    jobs += [j for a in rerun for j in comp.study_jobs[a]]
-    return [*jobs, *comp.new_jobs]
+    return [*comp.sample_jobs(rerun), *comp.rerun_jobs(rerun), *comp.new_jobs]
 
 
 def run_comparison(
@@ -413,12 +419,11 @@ def _run_locked(
         )
 
     try:
-        run([j for a, s in comp.sample.items() if a not in rerun for j in s], f"verify {comp.study}")
+        run(comp.sample_jobs(rerun), f"verify {comp.study}")
         verified = _verify(comp, out_dir, rerun, rerun_baselines)  # no tables unless it passes
         _write_record(out_dir, comp, verified, rerun)
-        rerun_jobs = [j for a in comp.study_jobs if a in rerun for j in comp.study_jobs[a]]
         try:
-            run([*rerun_jobs, *comp.new_jobs], f"compare {comp.arm}")
+            run([*comp.rerun_jobs(rerun), *comp.new_jobs], f"compare {comp.arm}")
         finally:
             rows = _rows(comp, out_dir, rerun)
             write_tables(rows, out_dir)
@@ -508,8 +513,8 @@ def _mismatch_line(comp: Comparison, arm: str, job: Job, diffs: list[tuple[str, 
 def _rows(comp: Comparison, out_dir: Path, rerun: set[str]) -> list[dict[str, Any]]:
     """The tables' rows: each study arm's (committed, or rerun here) in the study's job order,
     then the new arm's finished episodes."""
-    ran = collect_rows([*[j for a in rerun for j in comp.study_jobs[a]], *comp.new_jobs], out_dir)
-    templates = [*ran, *(collect_rows([j for s in comp.sample.values() for j in s], out_dir))]
+    ran = collect_rows([*comp.rerun_jobs(rerun), *comp.new_jobs], out_dir)
+    templates = [*ran, *collect_rows(comp.sample_jobs(set()), out_dir)]
     parse = _parsers(templates)
     by_key = {row["key"]: row for row in ran}
     # Every row with the columns of this code and this grid: a committed row may lack a column

@@ -68,14 +68,11 @@ def comparison_section(rows: list[dict[str, Any]]) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
 
-    def num(x: float | None, fmt: str) -> str:
-        return "–" if x is None else fmt.format(x)
-
     for c in pairs:
         lines.append(
             f"| {c.clearance_m * 1e3:g} | {c.arm_a} | {c.arm_b} | {c.success_a} / {c.success_b} | "
-            f"{_p(c.p_success)} | {num(c.force_median_a, '{:.1f}')} / {num(c.force_median_b, '{:.1f}')} | "
-            f"{_p(c.p_force)} | {num(c.time_median_a, '{:.2f}')} / {num(c.time_median_b, '{:.2f}')} | "
+            f"{_p(c.p_success)} | {_num(c.force_median_a, '{:.1f}')} / {_num(c.force_median_b, '{:.1f}')} | "
+            f"{_p(c.p_force)} | {_num(c.time_median_a, '{:.2f}')} / {_num(c.time_median_b, '{:.2f}')} | "
             f"{_p(c.p_time)} | {', '.join(c.differs()) or 'no difference found'} |"
         )
     return [*lines, ""]

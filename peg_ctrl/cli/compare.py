@@ -121,7 +121,8 @@ def _dry_run(comp: Comparison, out: Path, workers: int, rerun_baselines: bool) -
     from peg_ctrl.run.batch import default_workers
 
     missing = comp.missing
-    jobs = jobs_to_run(comp, set(missing) if rerun_baselines else set())
+    rerun = set(missing) if rerun_baselines else set()
+    jobs = jobs_to_run(comp, rerun)
     counts: dict[tuple[str, str, str], int] = {}
     for job in jobs:
         key = (job.config.task.name, job.config.physics.profile, job.controller)
@@ -129,7 +130,7 @@ def _dry_run(comp: Comparison, out: Path, workers: int, rerun_baselines: bool) -
     size = dataclasses.replace(sweep_size(experiment_from_mapping(comp.experiment)), counts=counts)
     done = finished_summaries(out) if (out / "compare.json").is_file() else {}
     est = estimate(size, workers=workers, cores=default_workers(), done=done)
-    sampled = sum(len(s) for a, s in comp.sample.items() if not (rerun_baselines and a in missing))
+    sampled = len(comp.sample_jobs(rerun))
     lines = [
         f"compare {comp.arm} against {comp.study} ({comp.study_dir}): {len(jobs)} episodes to run",
         f"  the new arm: {len(comp.new_jobs)} episodes (the study's grid x seeds)",

@@ -5,12 +5,13 @@ package. :func:`load_plugin` imports the file as a module of its own, checks tha
 a :class:`~peg_ctrl.controllers.base.ControllerConfig` or a
 :class:`~peg_ctrl.tasks.strategies.StrategyConfig` subclass, and registers it under its
 ``name``. Sweep workers are new processes: the plugins travel with each episode's job and every
-worker loads them before it builds the episode (:func:`load_plugins` loads a file once per
-process).
+worker loads them before it builds the episode (a file is executed once per process: its module
+stays in ``sys.modules``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib.util
 import sys
@@ -26,24 +27,20 @@ __all__ = ["Plugin", "is_plugin", "load_plugin", "load_plugins"]
 #: What a plugin can be: its kind and the base class its config must extend.
 KINDS = {"controller": ControllerConfig, "strategy": StrategyConfig}
 
-# spec (resolved) -> the loaded class, so that a worker running many episodes imports once.
-_LOADED: dict[str, Plugin] = {}
 
-
+@dataclasses.dataclass(frozen=True)
 class Plugin:
     """A config class loaded from a user's file: its ``spec`` (``PATH.py:ClassName``, the path
-    resolved), its ``kind`` (controller or strategy) and its registered ``name``."""
+    resolved), its ``kind`` (controller or strategy) and the class."""
 
-    __slots__ = ("spec", "kind", "name", "cls")
+    spec: str
+    kind: str
+    cls: type
 
-    def __init__(self, spec: str, kind: str, cls: type) -> None:
-        self.spec = spec
-        self.kind = kind
-        self.cls = cls
-        self.name: str = cls.name  # type: ignore[attr-defined]
-
-    def __repr__(self) -> str:
-        return f"Plugin({self.spec!r}, {self.kind}, name={self.name!r})"
+    @property
+    def name(self) -> str:
+        """The name the class registers under."""
+        return str(self.cls.name)  # type: ignore[attr-defined]
 
 
 def is_plugin(value: str) -> bool:
@@ -73,13 +70,9 @@ def load_plugin(spec: str, kind: str | None = None) -> Plugin:
             message names the file, the class and what is allowed).
     """
     path, cls_name = _split(spec)
-    key = f"{path}:{cls_name}"
-    plugin = _LOADED.get(key)
-    if plugin is None:
-        plugin = _import(path, cls_name, spec)
-        register = register_controller if plugin.kind == "controller" else register_strategy
-        register(plugin.cls)  # type: ignore[arg-type]
-        _LOADED[key] = plugin
+    plugin = _import(path, cls_name, spec)  # a file is executed once per process (sys.modules)
+    register = register_controller if plugin.kind == "controller" else register_strategy
+    register(plugin.cls)  # type: ignore[arg-type]  # the same class again is a no-op
     if kind is not None and plugin.kind != kind:
         raise ConfigError(f"{spec}: {cls_name} is a {plugin.kind} config; a {kind} config is needed here")
     return plugin

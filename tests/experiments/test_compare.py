@@ -46,14 +46,13 @@ def _registries_restored() -> Iterator[None]:
     """What a test's plugins register stays in it (the registries live as long as the process,
     and other modules' tests list them)."""
     from peg_ctrl.controllers import REGISTRY
-    from peg_ctrl.run import plugins
     from peg_ctrl.tasks.strategies import STRATEGIES
 
-    saved = [(registry, dict(registry)) for registry in (REGISTRY, STRATEGIES, plugins._LOADED)]
+    saved = [(registry, dict(registry)) for registry in (REGISTRY, STRATEGIES)]
     yield
     for registry, before in saved:
         registry.clear()
-        registry.update(before)  # type: ignore[arg-type]
+        registry.update(before)
 
 
 @pytest.fixture(scope="module")
