@@ -44,14 +44,14 @@ import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.sim.rotations import quat_mul, rotate_inv, yaw_quat
+from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv, yaw_quat
 from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.strategies.base import HeldInsertion, TaskDisturbance
-from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy, WallPush
+from peg_ctrl.tasks.strategies.probe import PAD_NORMAL, ProbeConfig, ProbeStrategy, WallPush
 
-__all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_end"]
+__all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_across", "locate_end", "pair_offset"]
 
 _Vec = np.ndarray
 _AXES = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
@@ -75,6 +75,8 @@ class LocateConfig(ProbeConfig):
     touch_speed: float = 0.005  # the approach to a side: its impact is ~8 N at this, ~10 N at 0.01
     stall_fraction: float = 0.3  # it has met the side once the hand moves slower than this x touch_speed
     side_time: float = 8.0  # budget of the four touches and the moves between them
+    side_touches: int = 4  # 3: the end's offset along the pads' plane, one side touched once
+    quick_datum: bool = False  # the move from the sides to the datum at move_accel, turning back on it
     located_sigma: float = 0.0003  # the search's prior about the located hole
     located_radius: float = 0.0015  # ... and its extent
 
@@ -95,6 +97,8 @@ class LocateConfig(ProbeConfig):
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ConfigError(f"task.strategy.{name} must be > 0, got {getattr(self, name)!r}")
+        if self.side_touches not in (3, 4):
+            raise ConfigError(f"task.strategy.side_touches must be 3 or 4, got {self.side_touches!r}")
         if not 0 < self.stall_fraction < 1:
             raise ConfigError(f"task.strategy.stall_fraction must be in (0, 1), got {self.stall_fraction!r}")
         if self.side_depth >= 0.5 * scene.assets.block_size[2]:
@@ -127,6 +131,13 @@ class LocateStrategy(ProbeStrategy):
         if self.sides is None or self.sides.hole is None:
             return super().hole_prior()
         return self.sides.hole, self.cfg.located_sigma, self.cfg.located_radius
+
+    def _enter_datum(self, obs: Observation) -> Motion:
+        """probe's approach to the datum; after the sides with ``quick_datum``, briskly, at the
+        orientation the touches started from."""
+        if not self.cfg.quick_datum or self.sides is None:
+            return super()._enter_datum(obs)
+        return self.task.move(self.datum_waypoint(self.sides.quat), self.quick())
 
     def _enter_side(self, obs: Observation) -> Motion:
         """Up, out beyond the -x side, down below the face."""
@@ -166,6 +177,37 @@ def locate_end(touches: list[_Vec], yaw: float) -> _Vec:
     return np.linalg.solve(a, b)
 
 
+def turn(v: _Vec, angle: float) -> _Vec:
+    """The horizontal vector ``v`` (x, y) turned by ``angle`` [rad] about the vertical."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def pair_offset(touches: list[_Vec], legs: list[tuple[int, bool]], across: _Vec, yaw: float) -> float:
+    """The true end's offset from the believed one along ``across`` [m] (the unit direction
+    across the pads at yaw 0, world x, y), from the two touches of the side that ``legs[1]``
+    touches: ``legs`` gives each touch's (side, turned by ``yaw``), ``touches`` the believed
+    end's (x, y) at each. Both meet the same wall: ``believed + s * across`` along that axis."""
+    side = legs[1][0]  # the pair is the first two legs or the last two
+    a, b = (k for k, (leg_side, _) in enumerate(legs) if leg_side == side)
+    u_a, u_b = (turn(across, yaw if legs[k][1] else 0.0)[side] for k in (a, b))
+    return float((touches[a][side] - touches[b][side]) / (u_b - u_a))
+
+
+def locate_across(
+    touches: list[_Vec], legs: list[tuple[int, bool]], across: _Vec, yaw: float
+) -> tuple[float, _Vec]:
+    """Three touches (:func:`pair_offset`'s): the end's offset along ``across`` [m], and where
+    the true end met each side, (x at the -x side, y at the -y side) [m], from that side's first
+    touch."""
+    s = pair_offset(touches, legs, across, yaw)
+    met = np.zeros(2)
+    for side in (0, 1):
+        k = next(k for k, (leg_side, _) in enumerate(legs) if leg_side == side)
+        met[side] = touches[k][side] + s * turn(across, yaw if legs[k][1] else 0.0)[side]
+    return s, met
+
+
 class SideTouches:
     """The ``sides`` phase, as a motion the strategy plays and steps (module docstring).
 
@@ -188,6 +230,11 @@ class SideTouches:
         t, c = self.task, self.cfg
         self.quat = np.asarray(t.goal.quat_world, dtype=float)
         self._turned = quat_mul(yaw_quat(c.yaw), self.quat)
+        # Across the pads at yaw 0 (world x, y): the only way the end can sit off the believed one.
+        closing = rotate(self.quat, PAD_NORMAL)
+        across = np.array([-closing[1], closing[0]])
+        self._across = across / np.linalg.norm(across)
+        self._legs = self._plan_legs()
         self.touched: list[_Vec] = []
         self.delta: _Vec | None = None
         self.hole: _Vec | None = None
@@ -211,11 +258,41 @@ class SideTouches:
     def sample(self, t: float) -> GripperTarget:
         return self._target  # set by step(), which keeps the episode's clock
 
+    # -- legs ----------------------------------------------------------------------------------------
+    def _plan_legs(self) -> list[tuple[int, bool]]:
+        """(side, turned) per touch. Four: each side at yaw 0, then turned. Three: the end's
+        offset lies across the pads (``_across``), so one scalar: the side on which a turn moves
+        the end most along the approach is touched twice, the other once, one turn in all."""
+        if self.cfg.side_touches == 4:
+            return [(0, False), (0, True), (1, False), (1, True)]
+        swing = np.abs(self._across - self._across_at(True))
+        return (
+            [(0, False), (0, True), (1, True)]
+            if swing[0] >= swing[1]
+            else [(0, False), (1, False), (1, True)]
+        )
+
+    def _across_at(self, turned: bool) -> _Vec:
+        """The across-the-pads direction with the hand at yaw 0 or turned (world x, y)."""
+        return turn(self._across, self.cfg.yaw if turned else 0.0)
+
+    def _leg(self, n: int | None = None) -> tuple[int, _Vec]:
+        """Leg ``n``'s (by default the present one's) side (0: -x, 1: -y) and the hand's orientation."""
+        side, turned = self._legs[len(self.touched) if n is None else n]
+        return side, (self._turned if turned else self.quat)
+
+    def _offset_along(self, n: int) -> float:
+        """The true end's offset from the believed one along leg ``n``'s side's axis, with the
+        hand as in leg ``n``, from the touches so far (three-touch mode; the -x side's first
+        touch and the camera's side if its pair is not yet touched)."""
+        side, turned = self._legs[n]
+        if len(self.touched) >= 2 and self._legs[1][0] == 0:
+            s = pair_offset(self.touched, self._legs, self._across, self.cfg.yaw)
+        else:  # one touch of the -x side: its wall where the camera and the drawing put it
+            s = (self._side_at[0] - self.task.radius - self.touched[0][0]) / self._across[0]
+        return float(s * self._across_at(turned)[side])
+
     # -- paths ---------------------------------------------------------------------------------------
-    def _leg(self) -> tuple[int, _Vec]:
-        """The present leg's side (0: -x, 1: -y) and the hand's orientation."""
-        n = len(self.touched)
-        return n // 2, (self.quat if n % 2 == 0 else self._turned)
 
     def _start_of(self, side: int) -> _Vec:
         """Where the approach to ``side`` starts: ``side_gap`` beyond the side the drawing gives,
@@ -225,7 +302,10 @@ class SideTouches:
         c = self.cfg
         start = np.array([*self._along, self._z_low])
         start[side] = self._side_at[side] - self.task.radius - c.side_gap
-        if side == 1 and len(self.touched) >= 2:
+        if side == 1 and c.side_touches == 3:
+            d_y = self._offset_along(len(self.touched))
+            start[1] = self._side_at[1] - d_y - self.task.radius - c.camera_gap
+        elif side == 1 and len(self.touched) >= 2:
             # (1 - cos yaw) d_x + sin(yaw) d_y: d_x's share is within a millimetre of d_y
             d_y = (self.touched[1][0] - self.touched[0][0]) / math.sin(c.yaw)
             start[1] = self._side_at[1] - d_y - self.task.radius - c.camera_gap
@@ -233,7 +313,12 @@ class SideTouches:
 
     def _plan(self, tips: list[_Vec], quats: list[_Vec]) -> Motion:
         st = self.strategy
-        w = [st.tip_waypoint(tip, q) for tip, q in zip(tips, quats, strict=True)]
+        pairs = [
+            (tip, q)
+            for k, (tip, q) in enumerate(zip(tips, quats, strict=True))
+            if k == 0 or not (np.array_equal(tip, tips[k - 1]) and np.array_equal(q, quats[k - 1]))
+        ]
+        w = [st.tip_waypoint(tip, q) for tip, q in pairs]
         parts = [self.task.planner.plan(a, b, st.quick()) for a, b in zip(w, w[1:], strict=False)]
         self.task.goal = w[-1]
         return TrajectorySequence(parts)
@@ -306,7 +391,7 @@ class SideTouches:
             return
         side, q = self._leg()
         self.touched.append(wall)
-        if len(self.touched) == 4:
+        if len(self.touched) == len(self._legs):
             self._locate()
             self._leave(obs)
             return
@@ -325,19 +410,28 @@ class SideTouches:
 
     def _locate(self) -> None:
         """The end against the hand, then the hole against the end (yaw 0)."""
-        delta = locate_end(self.touched, self.cfg.yaw)
         r = self.task.radius
-        self.delta = delta
-        x = self.touched[0][0] + delta[0] + r + self._distance[0]
-        y = self.touched[2][1] + delta[1] + r + self._distance[1]
-        self.hole = np.array([x, y])
+        if self.cfg.side_touches == 4:
+            delta = locate_end(self.touched, self.cfg.yaw)
+            self.delta = delta
+            x = self.touched[0][0] + delta[0] + r + self._distance[0]
+            y = self.touched[2][1] + delta[1] + r + self._distance[1]
+            self.hole = np.array([x, y])
+            return
+        s, met = locate_across(self.touched, self._legs, self._across, self.cfg.yaw)
+        self.delta = s * self._across
+        self.hole = met + r + np.asarray(self._distance)
 
     def _leave(self, obs: Observation) -> None:
         """Back off the side, turn back, up clear of the face."""
-        side, q = self._leg() if len(self.touched) < 4 else (1, self._turned)
+        n = min(len(self.touched), len(self._legs) - 1)  # the leg met, or the one given up
+        side, q = self._leg(n)
         tip = self.task.believed_bottom(obs)
         back = tip.copy()
         back[side] -= self.cfg.side_backoff
         up = np.array([*back[:2], self._z_high])
-        self._trajectory = self._plan([tip, back, back, up], [q, q, self.quat, self.quat])
+        if self.cfg.quick_datum:  # the move to the datum turns back, clear of the face
+            self._trajectory = self._plan([tip, back, up], [q, q, q])
+        else:
+            self._trajectory = self._plan([tip, back, back, up], [q, q, self.quat, self.quat])
         self._state, self._t0 = "leave", obs.t

@@ -289,11 +289,14 @@ class ProbeStrategy(Strategy):
 
     # -- datum, touch, align, reference ----------------------------------------------------------------
     def _enter_datum(self, obs: Observation) -> Motion:
+        return self.task.move(self.datum_waypoint(np.asarray(self.task.goal.quat_world)))
+
+    def datum_waypoint(self, q: _Vec) -> Waypoint:
+        """The lower end ``touch_gap`` above the datum, the hand at ``q``."""
         t, c = self.task, self.cfg
-        q = np.asarray(t.goal.quat_world)
         off = c.datum_offset / math.sqrt(2.0)
         tip = np.array([t.observed_hole[0] - off, t.observed_hole[1] - off, t.block_top + c.touch_gap])
-        return t.move(self.tip_waypoint(tip, q))
+        return self.tip_waypoint(tip, q)
 
     def _enter_touch(self, obs: Observation) -> Motion:
         self.landing = self.land(obs, PRESS_AXES)
@@ -504,7 +507,7 @@ class RockCalibration:
         from the believed one (world) [m], and how far the end's lowest point is below its
         centre [m]."""
         t = self.task
-        up = _turned(t.up_body, _PAD_NORMAL, theta)
+        up = _turned(t.up_body, PAD_NORMAL, theta)
         # An end located by touch is where the task believes it, whatever the tilt.
         offset = np.zeros(3) if self.end_known else rotate(q, t.grip_length * (t.up_body - up))
         a = rotate(q, up)
@@ -526,7 +529,7 @@ class RockCalibration:
         highest contact the landings so far allow, then land."""
         t, c, st = self.task, self.cfg, self.strategy
         angle = self._angles[len(self.landings) - 1]
-        q = quat_mul(about(rotate(self.q0, _PAD_NORMAL), angle), self.q0)
+        q = quat_mul(about(rotate(self.q0, PAD_NORMAL), angle), self.q0)
         # The tilts the landings so far allow, given the face's height on the drawing (to within
         # how far a landing presses into it) and that it is one face: the next landing starts
         # just above the highest of them.
@@ -586,12 +589,12 @@ class RockCalibration:
         curve = c0 - 2.0 * c1 + c2
         step = float(self._thetas[1] - self._thetas[0])
         self.tilt = float(self._thetas[k]) + (0.5 * step * (c0 - c2) / curve if curve > 0 else 0.0)
-        self.axis_body = _turned(self.task.up_body, _PAD_NORMAL, self.tilt)
+        self.axis_body = _turned(self.task.up_body, PAD_NORMAL, self.tilt)
         self.z_face = float(np.mean(faces[:, k]))
 
 
 _FACE_TOLERANCE = 0.0002  # a landing's height on the face matches the drawing's to this [m]
-_PAD_NORMAL = np.array([1.0, 0.0, 0.0])  # the jaw's closing direction, gripper frame: the peg turns about it
+PAD_NORMAL = np.array([1.0, 0.0, 0.0])  # the jaw's closing direction, gripper frame: the peg turns about it
 
 
 def _turned(v: _Vec, axis: _Vec, angle: float) -> _Vec:

@@ -1,5 +1,6 @@
-"""The locate strategy: the end's offset from two touches per side with the hand turned, its
-settings checked, and a held insertion at FORGE's difficulty run in the physics."""
+"""The locate strategy: the end's offset from two touches per side with the hand turned (or
+three touches, the offset across the pads), its settings checked, and a held insertion at
+FORGE's difficulty run in the physics."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from peg_ctrl.config import apply_overrides
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.planners.base import Waypoint
 from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
-from peg_ctrl.tasks.strategies.locate import LocateConfig, locate_end
+from peg_ctrl.tasks.strategies.locate import LocateConfig, locate_across, locate_end, pair_offset, turn
 
 
 @pytest.mark.parametrize("delta", [(0.003, -0.002), (-0.0054, 0.0), (0.0, 0.0)])
@@ -35,12 +36,47 @@ def test_four_touches_give_the_end_against_the_believed_one(delta: tuple[float, 
     np.testing.assert_allclose(locate_end(touches, yaw), d, atol=1e-12)
 
 
+@pytest.mark.parametrize("legs", [[(0, False), (0, True), (1, True)], [(0, False), (1, False), (1, True)]])
+@pytest.mark.parametrize("angle", [0.3, 1.2, 2.5, -2.0])
+@pytest.mark.parametrize("offset", [0.0042, -0.0011])
+def test_three_touches_give_the_offset_across_the_pads(
+    legs: list[tuple[int, bool]], angle: float, offset: float
+) -> None:
+    """The true end is ``offset`` along the across-the-pads direction from the believed one; the
+    hand turned by ``yaw`` turns that direction with it. Each touch stops the believed end short
+    of its side by the true end's offset along the approach; the pair's two touches of one side
+    give the offset, and each side's first touch where the true end met it."""
+    yaw = 0.25
+    across = np.array([math.cos(angle), math.sin(angle)])
+    walls = np.array([0.15, -0.05])  # where the true end meets the -x and the -y side [m]
+    touches = []
+    for k, (side, turned) in enumerate(legs):
+        u = turn(across, yaw if turned else 0.0)
+        believed = np.array([0.17 + 0.001 * k, -0.02 - 0.001 * k])
+        believed[side] = walls[side] - offset * u[side]
+        touches.append(believed)
+    pair_side = legs[1][0]
+    swing = abs(across[pair_side] - turn(across, yaw)[pair_side])
+    if swing < 0.05:
+        pytest.skip("this pair sees little of the offset: the strategy touches the other side twice")
+    assert pair_offset(touches, legs, across, yaw) == pytest.approx(offset, abs=1e-12)
+    s, met = locate_across(touches, legs, across, yaw)
+    assert s == pytest.approx(offset, abs=1e-12)
+    np.testing.assert_allclose(met, walls, atol=1e-12)
+
+
+def test_turn_turns_about_the_vertical() -> None:
+    np.testing.assert_allclose(turn(np.array([1.0, 0.0]), 0.5 * math.pi), [0.0, 1.0], atol=1e-15)
+    np.testing.assert_allclose(turn(np.array([0.3, -0.4]), 0.0), [0.3, -0.4])
+
+
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
         ("yaw", 0.0, "task.strategy.yaw must be > 0, got 0.0"),
         ("touch_speed", -0.01, "task.strategy.touch_speed must be > 0, got -0.01"),
         ("stall_fraction", 1.0, "task.strategy.stall_fraction must be in (0, 1), got 1.0"),
+        ("side_touches", 2, "task.strategy.side_touches must be 3 or 4, got 2"),
         (
             "side_depth",
             0.03,
@@ -57,11 +93,16 @@ def test_bad_settings_are_named(field: str, value: float, message: str) -> None:
     assert LocateConfig().insert_speed == 0.03  # slower than probe's
 
 
-@pytest.mark.slow  # one held insertion, ~10 s of simulation
-def test_locate_finds_the_end_and_seats_at_forges_difficulty() -> None:
+@pytest.mark.slow  # one held insertion each, ~10 s of simulation
+@pytest.mark.parametrize(
+    "touches",
+    [{}, {"side_touches": 3, "quick_datum": True, "side_backoff": 0.0015, "touch_speed": 0.01}],
+    ids=["four", "three"],
+)
+def test_locate_finds_the_end_and_seats_at_forges_difficulty(touches: dict[str, object]) -> None:
     """3 mm in the hand, 2 degrees of tilt, the hole observed 1 mm off (sigma), FORGE's 1 N of
     force noise, friction 0.9, the hand's pose and velocity noisy: the end is located to 0.3 mm
-    in the hand, the tilt to 0.2 degrees, and the peg seats."""
+    in the hand, the tilt to 0.2 degrees, and the peg seats; with four touches, or with three."""
     mpc = {
         "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
         "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
@@ -75,7 +116,7 @@ def test_locate_finds_the_end_and_seats_at_forges_difficulty() -> None:
             "controller": mpc,
             "task": {
                 "name": "held_insertion",
-                "strategy": "locate",
+                "strategy": {"name": "locate", **touches},
                 "lateral_error": 0.003,
                 "tilt_error": 0.0349066,
                 "position_noise": 0.001,
