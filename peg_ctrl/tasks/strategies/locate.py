@@ -75,6 +75,7 @@ class LocateConfig(ProbeConfig):
     touch_speed: float = 0.005  # the approach to a side: its impact is ~8 N at this, ~10 N at 0.01
     stall_fraction: float = 0.3  # it has met the side once the hand moves slower than this x touch_speed
     side_time: float = 8.0  # budget of the four touches and the moves between them
+    turn_speed: float = 1.0  # [rad/s] the hand's turns about the end between touches
     side_touches: int = 4  # 3: the end's offset along the pads' plane, one side touched once
     quick_datum: bool = False  # the move from the sides to the datum at move_accel, turning back on it
     located_sigma: float = 0.0003  # the search's prior about the located hole
@@ -312,14 +313,15 @@ class SideTouches:
         return start
 
     def _plan(self, tips: list[_Vec], quats: list[_Vec]) -> Motion:
-        st = self.strategy
+        st, c = self.strategy, self.cfg
         pairs = [
             (tip, q)
             for k, (tip, q) in enumerate(zip(tips, quats, strict=True))
             if k == 0 or not (np.array_equal(tip, tips[k - 1]) and np.array_equal(q, quats[k - 1]))
         ]
         w = [st.tip_waypoint(tip, q) for tip, q in pairs]
-        parts = [self.task.planner.plan(a, b, st.quick()) for a, b in zip(w, w[1:], strict=False)]
+        limits = dataclasses.replace(st.quick(), v_rot=c.turn_speed)
+        parts = [self.task.planner.plan(a, b, limits) for a, b in zip(w, w[1:], strict=False)]
         self.task.goal = w[-1]
         return TrajectorySequence(parts)
 
