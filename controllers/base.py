@@ -265,11 +265,15 @@ class ControllerConfig:
     GAINS: ClassVar[tuple[str, ...]] = ()
     VECTORS: ClassVar[tuple[str, ...]] = ()  # 3-vector fields of any sign (points, offsets) [m]
     # Number fields that may be 0; a subclass's add to its bases' (collected along the MRO).
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("velocity_filter_hz",)
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("velocity_filter_hz", "position_filter_hz")
     control_dt: float = 0.001  # control period [s], a whole multiple of the physics timestep
     # A first-order low-pass on the sensed velocities before the control law [Hz]; 0: none. A
     # robot's velocities are differences of encoder positions: noisy (docs/sensing.md).
     velocity_filter_hz: float = 0.0
+    # The sensed position through a first-order observer of this bandwidth [Hz]: predicted with
+    # the (filtered) sensed velocity, corrected towards each reading; 0: the reading as is. A
+    # pose sensed with noise on every reading makes a stiff law shake the hand by as much.
+    position_filter_hz: float = 0.0
 
     def __post_init__(self) -> None:
         numeric = []
@@ -394,24 +398,37 @@ class ControllerBase(abc.ABC, Generic[_Cfg]):
         hz = config.velocity_filter_hz
         self._v_alpha = lowpass_alpha(hz, config.control_dt) if hz > 0 else 0.0
         self._v_filtered: NDArray[np.float64] | None = None
+        hz = config.position_filter_hz
+        self._p_alpha = lowpass_alpha(hz, config.control_dt) if hz > 0 else 0.0
+        self._p_estimate: NDArray[np.float64] | None = None
 
     def reset(self, state: ControlState) -> None:
         """Start an episode from ``state``: clears the controller's memory."""
         self._jaw_cache = (math.nan, 0.0)
         self._v_filtered = None
+        self._p_estimate = None
         self._reset(self._filtered(state))
 
     def _filtered(self, state: ControlState) -> ControlState:
-        """``state`` with its velocities through the ``velocity_filter_hz`` low-pass (as is
-        without one)."""
-        if not self._v_alpha:
-            return state
-        v = np.concatenate([state.v_world, state.omega_body])
-        if self._v_filtered is None:
-            self._v_filtered = v
-        else:
-            self._v_filtered += self._v_alpha * (v - self._v_filtered)
-        return state._replace(v_world=self._v_filtered[:3].copy(), omega_body=self._v_filtered[3:].copy())
+        """``state`` with its velocities through the ``velocity_filter_hz`` low-pass and its
+        position through the ``position_filter_hz`` observer (each as is without one)."""
+        if self._v_alpha:
+            v = np.concatenate([state.v_world, state.omega_body])
+            if self._v_filtered is None:
+                self._v_filtered = v
+            else:
+                self._v_filtered += self._v_alpha * (v - self._v_filtered)
+            state = state._replace(
+                v_world=self._v_filtered[:3].copy(), omega_body=self._v_filtered[3:].copy()
+            )
+        if self._p_alpha:
+            if self._p_estimate is None:
+                self._p_estimate = np.array(state.p_world, dtype=float)
+            else:
+                self._p_estimate += self.control_dt * np.asarray(state.v_world)
+                self._p_estimate += self._p_alpha * (state.p_world - self._p_estimate)
+            state = state._replace(p_world=self._p_estimate.copy())
+        return state
 
     def _reset(self, state: ControlState) -> None:
         """Clear the control law's own memory (filters, integrators, warm starts)."""

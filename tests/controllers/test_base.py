@@ -332,3 +332,37 @@ def test_the_velocity_filter_low_passes_the_sensed_velocities(
         ConfigError, match=r"^constant\.velocity_filter_hz: must be finite and >= 0, got -1\.0$"
     ):
         ConstantConfig(velocity_filter_hz=-1.0)
+
+
+def test_the_position_observer_quiets_a_noisy_pose_without_lagging_a_motion(
+    model: mujoco.MjModel, home_state: ControlState
+) -> None:
+    """position_filter_hz: the sensed position predicted with the sensed velocity and pulled
+    towards each reading. Readings with 30 um of white noise about a still hand come out within
+    a quarter of that; a hand moving at constant speed, sensed exactly, is followed with no lag;
+    reset starts again from the reading."""
+    dt, hz, sigma = 0.001, 3.0, 3e-5
+    observer = Recording(model, ConstantConfig(control_dt=dt, position_filter_hz=hz))
+    observer.reset(home_state)
+    rng = np.random.default_rng(0)
+    tgt = target(home_state.p_world)
+    for _ in range(2000):
+        noisy = home_state._replace(p_world=home_state.p_world + rng.normal(0.0, sigma, 3))
+        observer.compute(noisy, tgt)
+    error = np.array([s.p_world - home_state.p_world for s in observer.seen[500:]])
+    assert float(error.std()) < 0.25 * sigma
+    v = np.array([0.03, -0.01, 0.0])
+    observer.reset(home_state)
+    observer.seen.clear()
+    for k in range(1, 200):
+        moving = home_state._replace(p_world=home_state.p_world + k * dt * v, v_world=v)
+        observer.compute(moving, tgt)
+        np.testing.assert_allclose(observer.seen[-1].p_world, moving.p_world, atol=1e-12)
+    jumped = home_state._replace(p_world=home_state.p_world + 0.01)
+    observer.reset(jumped)
+    observer.compute(jumped, tgt)
+    np.testing.assert_array_equal(observer.seen[-1].p_world, jumped.p_world)
+    with pytest.raises(
+        ConfigError, match=r"^constant\.position_filter_hz: must be finite and >= 0, got -3\.0$"
+    ):
+        ConstantConfig(position_filter_hz=-3.0)
