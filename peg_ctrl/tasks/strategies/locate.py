@@ -55,6 +55,7 @@ __all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_across", "lo
 
 _Vec = np.ndarray
 _AXES = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+_BLOCKED_AFTER = 0.1  # [s] an approach whose hand has not followed its command by then is blocked
 
 
 @dataclasses.dataclass(frozen=True)
@@ -253,6 +254,7 @@ class SideTouches:
         self._t0 = obs.t
         self._wall: WallPush | None = None
         self._at_speed = False
+        self._moving_since: float | None = None  # when the approach's command got going
         self._trajectory: Motion | None = None
         self._target = GripperTarget.trusted(obs.gripper.p_world, self.quat, np.zeros(3), np.zeros(3), 0.0)
 
@@ -362,20 +364,26 @@ class SideTouches:
         goal[side] += 2.0 * (c.camera_gap if side == 1 else c.side_gap)
         limits = dataclasses.replace(self.task.limits, v_lin=c.touch_speed, a_lin=c.move_accel)
         self._trajectory = self.task.planner.plan(st.tip_waypoint(tip, q), st.tip_waypoint(goal, q), limits)
-        self._state, self._t0, self._at_speed = "approach", obs.t, False
+        self._state, self._t0, self._at_speed, self._moving_since = "approach", obs.t, False, None
 
     def _stalled(self, obs: Observation) -> bool:
         """The hand's filtered speed along the approach below ``stall_fraction`` of the
         command's, while the command still moves at half its speed or more, once the hand has
-        followed it (a deceleration at the end is no stall)."""
+        followed it (a deceleration at the end is no stall), or if it never follows it: still
+        that slow ``_BLOCKED_AFTER`` after the command got going (the end met the side as the
+        approach began: a turn can swing it there)."""
         c = self.cfg
         axis = _AXES[self._leg()[0]]
         v = float(np.dot(self.task.hand_velocity[:2], axis))
         v_cmd = float(np.dot(self._target.v_world[:2], axis))
+        moving = v_cmd > 0.5 * c.touch_speed
         if not self._at_speed:
             self._at_speed = v > 2.0 * c.stall_fraction * c.touch_speed
-            return False
-        return v_cmd > 0.5 * c.touch_speed and v < c.stall_fraction * v_cmd
+            if moving and self._moving_since is None:
+                self._moving_since = obs.t
+            blocked = self._moving_since is not None and obs.t - self._moving_since > _BLOCKED_AFTER
+            return not self._at_speed and blocked and moving and v < c.stall_fraction * v_cmd
+        return moving and v < c.stall_fraction * v_cmd
 
     def _press(self, obs: Observation) -> None:
         """Hold here, pushing on into the side at the wall force (that lateral axis free)."""
