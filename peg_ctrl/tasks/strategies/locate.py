@@ -32,6 +32,13 @@ Phases:
 
 A side the approach does not meet within twice ``side_gap`` leaves the grasp as believed and the
 hole where the camera saw it, searched with ``probe``'s prior.
+
+``side_touches: 3``: between two pads the end can sit off the believed one only across them
+(the pads centre it along their closing direction; the tilt in the grasp turns it about that
+direction), so the offset is one length along a known direction. The side on which a turn moves
+the end most along the approach is touched twice (yaw 0, then turned), the other once
+(:func:`pair_offset`, :func:`locate_across`); ``quick_datum`` then moves to the datum at
+``move_accel``, turning back on the way (docs/contact_real.md, "Three touches and a quiet hand").
 """
 
 from __future__ import annotations

@@ -95,20 +95,27 @@ def test_bad_settings_are_named(field: str, value: float, message: str) -> None:
 
 @pytest.mark.slow  # one held insertion each, ~10 s of simulation
 @pytest.mark.parametrize(
-    "touches",
-    [{}, {"side_touches": 3, "quick_datum": True, "side_backoff": 0.0015, "touch_speed": 0.01}],
+    ("touches", "observer"),
+    [
+        ({}, 0.0),
+        ({"side_touches": 3, "quick_datum": True, "side_backoff": 0.0025, "touch_speed": 0.01}, 3.0),
+    ],
     ids=["four", "three"],
 )
-def test_locate_finds_the_end_and_seats_at_forges_difficulty(touches: dict[str, object]) -> None:
+def test_locate_finds_the_end_and_seats_at_forges_difficulty(
+    touches: dict[str, object], observer: float
+) -> None:
     """3 mm in the hand, 2 degrees of tilt, the hole observed 1 mm off (sigma), FORGE's 1 N of
     force noise, friction 0.9, the hand's pose and velocity noisy: the end is located to 0.3 mm
-    in the hand, the tilt to 0.2 degrees, and the peg seats; with four touches, or with three."""
+    in the hand, the tilt to 0.2 degrees, and the peg seats; with four touches, or with three
+    (and the controller's position observer)."""
     mpc = {
         "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
         "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
         "control_dt": 0.001, "contact_dt": 0.002, "mpc_dt": 0.005, "q_vel": 100.0,
         "max_contact_speed": 0.002, "accel_filter_hz": 30.0, "moment_filter_hz": 3.5,
         "reversal_backoff": 2.0, "sensor_latency": 0.015, "velocity_filter_hz": 30.0,
+        "position_filter_hz": observer,
     }  # fmt: skip
     cfg = episode_config_from_mapping(
         {
