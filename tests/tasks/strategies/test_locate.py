@@ -95,20 +95,22 @@ def test_bad_settings_are_named(field: str, value: float, message: str) -> None:
 
 @pytest.mark.slow  # one held insertion each, ~10 s of simulation
 @pytest.mark.parametrize(
-    ("touches", "observer"),
+    ("touches", "observer", "within"),
     [
-        ({}, 0.0),
-        ({"side_touches": 3, "quick_datum": True, "side_backoff": 0.0025, "touch_speed": 0.01}, 3.0),
+        ({}, 0.0, 0.0003),
+        # one reading fewer: a reading's error reaches the end by up to 1 / (2 sin(yaw / 2) cos 45°)
+        # against the four touches' 1 / (2 sin(yaw / 2)): 1.41 x 0.3 mm
+        ({"side_touches": 3, "quick_datum": True, "side_backoff": 0.0025, "touch_speed": 0.01}, 3.0, 0.00042),
     ],
     ids=["four", "three"],
 )
 def test_locate_finds_the_end_and_seats_at_forges_difficulty(
-    touches: dict[str, object], observer: float
+    touches: dict[str, object], observer: float, within: float
 ) -> None:
     """3 mm in the hand, 2 degrees of tilt, the hole observed 1 mm off (sigma), FORGE's 1 N of
     force noise, friction 0.9, the hand's pose and velocity noisy: the end is located to 0.3 mm
-    in the hand, the tilt to 0.2 degrees, and the peg seats; with four touches, or with three
-    (and the controller's position observer)."""
+    in the hand (0.42 mm with three touches), the tilt to 0.2 degrees, and the peg seats; with
+    four touches, or with three (and the controller's position observer)."""
     mpc = {
         "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
         "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
@@ -154,5 +156,5 @@ def test_locate_finds_the_end_and_seats_at_forges_difficulty(
         if ev.done:
             break
     assert ev.success, ev.detail
-    assert located is not None and located < 0.0003
+    assert located is not None and located < within
     assert tilt is not None and abs(math.degrees(tilt - in_hand)) < 0.2
