@@ -158,3 +158,30 @@ def test_locate_finds_the_end_and_seats_at_forges_difficulty(
     assert ev.success, ev.detail
     assert located is not None and located < within
     assert tilt is not None and abs(math.degrees(tilt - in_hand)) < 0.2
+
+
+def test_an_approach_that_never_gets_going_is_a_stall() -> None:
+    """The end already on the side as the approach begins (a turn swung it there): the hand
+    never follows the command; 0.1 s after the command got going that is a stall, not a push on
+    for the whole approach. A hand that follows is no stall until it slows."""
+    from types import SimpleNamespace
+
+    from peg_ctrl.tasks.strategies.locate import SideTouches
+
+    def touches(hand_speed: float) -> SideTouches:
+        st = object.__new__(SideTouches)
+        st.cfg = LocateConfig(touch_speed=0.01, stall_fraction=0.3)
+        st._legs, st.touched = [(0, False), (0, True), (1, True)], [np.zeros(2)]
+        st.quat = st._turned = np.array([1.0, 0.0, 0.0, 0.0])
+        st.task = SimpleNamespace(hand_velocity=np.array([hand_speed, 0.0, 0.0]))
+        st._target = SimpleNamespace(v_world=np.array([0.01, 0.0, 0.0]))
+        st._at_speed, st._moving_since = False, None
+        return st
+
+    blocked = touches(0.001)
+    assert [blocked._stalled(SimpleNamespace(t=t)) for t in (1.0, 1.05, 1.099)] == [False] * 3
+    assert blocked._stalled(SimpleNamespace(t=1.101))
+    free = touches(0.009)
+    assert not any(free._stalled(SimpleNamespace(t=t)) for t in (1.0, 1.05, 1.2))
+    free.task.hand_velocity = np.array([0.002, 0.0, 0.0])
+    assert free._stalled(SimpleNamespace(t=1.21))
