@@ -220,10 +220,11 @@ def locate_across(
 class SideTouches:
     """The ``sides`` phase, as a motion the strategy plays and steps (module docstring).
 
-    Four legs: (-x side, yaw 0), (-x, ``yaw``), (-y, yaw 0), (-y, ``yaw``). Per leg: ``move``
-    (a planned path to the approach's start), ``approach`` (guarded, pose-tracked), ``press``
-    (the lateral push until the hand is still); then ``leave`` (back off, turn back, up clear of
-    the face).
+    Four legs: (-x side, yaw 0), (-x, ``yaw``), (-y, yaw 0), (-y, ``yaw``); three (``side_touches:
+    3``, :meth:`_plan_legs`): one side twice, the other once, turned. Per leg: ``move`` (a planned
+    path to the approach's start), ``approach`` (guarded, pose-tracked), ``press`` (the lateral
+    push until the hand is still); then ``leave`` (back off, turn back, up clear of the face;
+    with ``quick_datum`` the move to the datum turns back).
 
     Attributes:
         touched: the believed lower end's (x, y) [m] at each touch; ``delta``: the true end's
