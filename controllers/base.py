@@ -272,7 +272,8 @@ class ControllerConfig:
     velocity_filter_hz: float = 0.0
     # The sensed position through a first-order observer of this bandwidth [Hz]: predicted with
     # the (filtered) sensed velocity, corrected towards each reading; 0: the reading as is. A
-    # pose sensed with noise on every reading makes a stiff law shake the hand by as much.
+    # pose sensed with noise on every reading makes a stiff law shake the hand by as much. It
+    # quiets a position whose noise is independent of the velocity's (the studies' model).
     position_filter_hz: float = 0.0
 
     def __post_init__(self) -> None:

@@ -72,6 +72,7 @@ class LocateConfig(ProbeConfig):
     name: ClassVar[str] = "locate"
     # probe's, the side touches first: its approach to the datum is ``datum`` here.
     phases: ClassVar[tuple[str, ...]] = ("approach", "sides", "datum", *ProbeConfig.phases[1:])
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = (*ProbeConfig.NON_NEGATIVE, "turn_speed")
     datum_offset: float = 0.032  # probe's, clear of the mouth at 3 mm in the hand, 1 mm of camera
     insert_speed: float = 0.03  # probe's descent, slower: 0.08 m/s taps the bore at ~50 N
     side_gap: float = 0.008  # the first approach starts this far beyond where the drawing puts the side
@@ -82,9 +83,9 @@ class LocateConfig(ProbeConfig):
     yaw: float = 0.25  # the second touch of a side, the hand turned this far about the vertical
     touch_speed: float = 0.005  # the approach to a side: its impact is ~8 N at this, ~10 N at 0.01
     stall_fraction: float = 0.3  # it has met the side once the hand moves slower than this x touch_speed
-    side_time: float = 8.0  # budget of the four touches and the moves between them
-    turn_speed: float = 1.0  # [rad/s] the hand's turns about the end between touches
-    side_touches: int = 4  # 3: the end's offset along the pads' plane, one side touched once
+    side_time: float = 8.0  # budget of the side touches and the moves between them
+    turn_speed: float = 0.0  # [rad/s] the hand's turns about the end between touches; 0: the task's limit
+    side_touches: int = 4  # 3: the end's offset in the pads' plane is one length, one side touched once
     quick_datum: bool = False  # the move from the sides to the datum at move_accel, turning back on it
     located_sigma: float = 0.0003  # the search's prior about the located hole
     located_radius: float = 0.0015  # ... and its extent
@@ -229,7 +230,7 @@ class SideTouches:
     Attributes:
         touched: the believed lower end's (x, y) [m] at each touch; ``delta``: the true end's
             offset from the believed one at yaw 0 (world x, y) [m]; ``hole``: the hole's axis
-            (x, y) [m], as the revised belief sees it (both None unless all four were found);
+            (x, y) [m], as the revised belief sees it (both None unless every side was found);
             ``done``: the end is back above the face; ``quat``: the hand's orientation at yaw 0.
     """
 
@@ -240,7 +241,8 @@ class SideTouches:
         t, c = self.task, self.cfg
         self.quat = np.asarray(t.goal.quat_world, dtype=float)
         self._turned = quat_mul(yaw_quat(c.yaw), self.quat)
-        # Across the pads at yaw 0 (world x, y): the only way the end can sit off the believed one.
+        # Horizontal in the pads' plane, square to their closing direction, at yaw 0 (world x, y):
+        # the only direction in which the end can sit off the believed one ("across" the jaw).
         closing = rotate(self.quat, PAD_NORMAL)
         across = np.array([-closing[1], closing[0]])
         self._across = across / np.linalg.norm(across)
@@ -309,7 +311,10 @@ class SideTouches:
         """Where the approach to ``side`` starts: ``side_gap`` beyond the side the drawing gives,
         one radius out, at the datum corner's other coordinate, below the face. The -y side's,
         once the -x side's two touches have told the end's offset along y (a turn about z moves
-        the end across the approach mostly): ``camera_gap`` beyond where the end will meet it."""
+        the end across the approach mostly): ``camera_gap`` beyond where the end will meet it.
+        With three touches, the end's offset in the pads' plane from the -x side's pair, or, if
+        the -y side takes the pair, from its one touch against the side the camera and the
+        drawing put there (:meth:`_offset_along`)."""
         c = self.cfg
         start = np.array([*self._along, self._z_low])
         start[side] = self._side_at[side] - self.task.radius - c.side_gap
@@ -330,7 +335,7 @@ class SideTouches:
             if k == 0 or not (np.array_equal(tip, tips[k - 1]) and np.array_equal(q, quats[k - 1]))
         ]
         w = [st.tip_waypoint(tip, q) for tip, q in pairs]
-        limits = dataclasses.replace(st.quick(), v_rot=c.turn_speed)
+        limits = st.quick() if not c.turn_speed else dataclasses.replace(st.quick(), v_rot=c.turn_speed)
         parts = [self.task.planner.plan(a, b, limits) for a, b in zip(w, w[1:], strict=False)]
         self.task.goal = w[-1]
         return TrajectorySequence(parts)

@@ -185,3 +185,35 @@ def test_an_approach_that_never_gets_going_is_a_stall() -> None:
     assert not any(free._stalled(SimpleNamespace(t=t)) for t in (1.0, 1.05, 1.2))
     free.task.hand_velocity = np.array([0.002, 0.0, 0.0])
     assert free._stalled(SimpleNamespace(t=1.21))
+
+
+@pytest.mark.parametrize(
+    ("angle", "legs"),
+    [
+        (0.0, [(0, False), (1, False), (1, True)]),  # across along x: a turn moves the end along y
+        (0.5 * math.pi, [(0, False), (0, True), (1, True)]),  # along y: it moves along x
+        (0.25 * math.pi, [(0, False), (0, True), (1, True)]),
+    ],
+)
+def test_three_touches_pair_the_side_a_turn_moves_the_end_along(
+    angle: float, legs: list[tuple[int, bool]]
+) -> None:
+    """The side touched twice is the one along whose approach a turn by ``yaw`` moves an end
+    that sits off across the pads the most; four touches keep both sides' pairs."""
+    from peg_ctrl.tasks.strategies.locate import SideTouches
+
+    st = object.__new__(SideTouches)
+    st.cfg = LocateConfig(side_touches=3)
+    st._across = np.array([math.cos(angle), math.sin(angle)])
+    assert st._plan_legs() == legs
+    st.cfg = LocateConfig()
+    assert st._plan_legs() == [(0, False), (0, True), (1, False), (1, True)]
+
+
+def test_turn_speed_zero_is_the_tasks_limit_and_negative_is_refused() -> None:
+    assert LocateConfig().turn_speed == 0.0
+    data = apply_overrides(
+        {"task": {"name": "held_insertion", "strategy": {"name": "locate", "turn_speed": -1.0}}}, []
+    )
+    with pytest.raises(ConfigError, match=r"^task\.strategy\.turn_speed must be >= 0, got -1\.0$"):
+        episode_config_from_mapping(data)
