@@ -117,9 +117,7 @@ class ProbeConfig(StrategyConfig):
     probe_time: float = 6.0  # budget of the search
     wall_force: float = 3.0  # centring: the lateral push that finds each wall of the bore's mouth
     centre_time: float = 1.0  # budget of the centring
-    centre_in_mouth: bool = (
-        True  # find the bore's axis on its walls (else descend from where the end entered)
-    )
+    centre_in_mouth: bool = True  # the bore's axis from its walls (else down from where the end entered)
     relax_time: float = 0.05  # on the bore's axis, still first
     insert_speed: float = 0.08  # the descent into the bore
     insert_accel: float = 2.0
