@@ -384,14 +384,16 @@ class SideTouches:
         command's, while the command still moves at half its speed or more, once the hand has
         followed it (a deceleration at the end is no stall), or if it never follows it: still
         that slow ``_BLOCKED_AFTER`` after the command got going (the end met the side as the
-        approach began: a turn can swing it there)."""
+        approach began: a turn can swing it there). Whether the hand follows is judged only
+        once the command moves: before, the hand's sway after the move that brought it here
+        can pass for speed (and a dip of it then for a stall)."""
         c = self.cfg
         axis = _AXES[self._leg()[0]]
         v = float(np.dot(self.task.hand_velocity[:2], axis))
         v_cmd = float(np.dot(self._target.v_world[:2], axis))
         moving = v_cmd > 0.5 * c.touch_speed
         if not self._at_speed:
-            self._at_speed = v > 2.0 * c.stall_fraction * c.touch_speed
+            self._at_speed = moving and v > 2.0 * c.stall_fraction * c.touch_speed
             if moving and self._moving_since is None:
                 self._moving_since = obs.t
             blocked = self._moving_since is not None and obs.t - self._moving_since > _BLOCKED_AFTER

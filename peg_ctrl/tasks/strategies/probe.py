@@ -118,6 +118,9 @@ class ProbeConfig(StrategyConfig):
     wall_force: float = 3.0  # centring: the lateral push that finds each wall of the bore's mouth
     centre_time: float = 1.0  # budget of the centring
     centre_in_mouth: bool = True  # the bore's axis from its walls (else down from where the end entered)
+    centre_reanchor: bool = (
+        False  # a reversed push starts from where the hand is (else from its pressed command)
+    )
     relax_time: float = 0.05  # on the bore's axis, still first
     insert_speed: float = 0.08  # the descent into the bore
     insert_accel: float = 2.0
@@ -635,6 +638,7 @@ class Centring:
         self.centre: _Vec | None = None
         self._start = obs.gripper.p_world.copy()
         self._p: _Vec = self._start.copy()  # the pushes' held position
+        self._reanchored = False  # the pose held for a tick before a reversed push
         self._push(obs)
 
     def sample(self, t: float) -> GripperTarget:
@@ -642,18 +646,34 @@ class Centring:
 
     def _push(self, obs: Observation) -> None:
         """Along the next direction, the other lateral axis held (at the middle of the x walls,
-        once found: a chord through the axis)."""
+        once found: a chord through the axis). With ``centre_reanchor``, a push that reverses
+        the last one is preceded by one tick of the pose held where the hand is: the axis stays
+        force-controlled across a reversal, so the contact loop would go on from its command,
+        pressed into the wall just found, and the hand would stand still there (a wall read on
+        the wrong side) while the command backs out."""
         n = len(self.walls)
         p = obs.gripper.p_world.copy()
         p[2] = self._start[2]
         if n == 2:  # the x walls found: over to the middle between them
             p[0] += 0.5 * (self.walls[0][0] + self.walls[1][0]) - self.task.believed_bottom(obs)[0]
         self._p = p if n != 3 else self._p
+        if n % 2 and self.cfg.centre_reanchor and not self._reanchored:
+            held = self._p.copy()
+            held[n // 2] = obs.gripper.p_world[n // 2]
+            self._target = GripperTarget.trusted(
+                held, self.strategy.quat_upright, np.zeros(3), np.zeros(3), 0.0
+            )
+            self._reanchored = True
+            return
+        self._reanchored = False
         self._wall = WallPush(self.strategy, obs, self._p, self.strategy.quat_upright, self._DIRECTIONS[n])
         self._target = self._wall.target
 
     def step(self, obs: Observation) -> None:
         if self.centre is not None:
+            return
+        if self._reanchored:  # the tick with the pose held is over: push
+            self._push(obs)
             return
         wall = self._wall.update(obs)
         if wall is None:

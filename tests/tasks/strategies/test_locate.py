@@ -13,7 +13,7 @@ import pytest
 from peg_ctrl.config import apply_overrides
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.planners.base import Waypoint
-from peg_ctrl.run.episode import build_loop, episode_config_from_mapping
+from peg_ctrl.run.episode import EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.tasks.strategies.locate import LocateConfig, locate_across, locate_end, pair_offset, turn
 
 
@@ -93,6 +93,38 @@ def test_bad_settings_are_named(field: str, value: float, message: str) -> None:
     assert LocateConfig().insert_speed == 0.03  # slower than probe's
 
 
+def _forge_difficulty(
+    strategy: dict[str, object], observer: float, *, seed: int = 7, friction: float = 0.9, **assets: float
+) -> EpisodeConfig:
+    """A locate episode at FORGE's difficulty: 3 mm in the hand, 2 degrees of tilt, the hole
+    observed 1 mm off (sigma), FORGE's 1 N of force noise, the hand's pose and velocity noisy."""
+    mpc = {
+        "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
+        "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
+        "control_dt": 0.001, "contact_dt": 0.002, "mpc_dt": 0.005, "q_vel": 100.0,
+        "max_contact_speed": 0.002, "accel_filter_hz": 30.0, "moment_filter_hz": 3.5,
+        "reversal_backoff": 2.0, "sensor_latency": 0.015, "velocity_filter_hz": 30.0,
+        "position_filter_hz": observer,
+    }  # fmt: skip
+    return episode_config_from_mapping(
+        {
+            "seed": seed,
+            "controller": mpc,
+            "task": {
+                "name": "held_insertion",
+                "strategy": {"name": "locate", **strategy},
+                "lateral_error": 0.003,
+                "tilt_error": 0.0349066,
+                "position_noise": 0.001,
+                "drawing_tolerance": 0.00015,
+            },
+            "domain": {"ft_sensor": "forge", "position_noise": 3e-5, "velocity_noise": 0.001},
+            "scene": {"assets": {"chamfer": 0.001, **assets}, "friction": friction},
+            "physics": {"profile": "precision"},
+        }
+    )
+
+
 @pytest.mark.slow  # one held insertion each, ~10 s of simulation
 @pytest.mark.parametrize(
     ("touches", "observer", "within"),
@@ -111,31 +143,7 @@ def test_locate_finds_the_end_and_seats_at_forges_difficulty(
     force noise, friction 0.9, the hand's pose and velocity noisy: the end is located to 0.3 mm
     in the hand (0.42 mm with three touches), the tilt to 0.2 degrees, and the peg seats; with
     four touches, or with three (and the controller's position observer)."""
-    mpc = {
-        "name": "mpc", "formulation": "contact", "compliance_center": [0.0, -0.07, -0.01],
-        "force_limit": 10.0, "force_damping": [2000.0, 2000.0, 100.0], "tare_time": 0.25,
-        "control_dt": 0.001, "contact_dt": 0.002, "mpc_dt": 0.005, "q_vel": 100.0,
-        "max_contact_speed": 0.002, "accel_filter_hz": 30.0, "moment_filter_hz": 3.5,
-        "reversal_backoff": 2.0, "sensor_latency": 0.015, "velocity_filter_hz": 30.0,
-        "position_filter_hz": observer,
-    }  # fmt: skip
-    cfg = episode_config_from_mapping(
-        {
-            "seed": 7,
-            "controller": mpc,
-            "task": {
-                "name": "held_insertion",
-                "strategy": {"name": "locate", **touches},
-                "lateral_error": 0.003,
-                "tilt_error": 0.0349066,
-                "position_noise": 0.001,
-                "drawing_tolerance": 0.00015,
-            },
-            "domain": {"ft_sensor": "forge", "position_noise": 3e-5, "velocity_noise": 0.001},
-            "scene": {"assets": {"chamfer": 0.001}, "friction": 0.9},
-            "physics": {"profile": "precision"},
-        }
-    )
+    cfg = _forge_difficulty(touches, observer)
     loop = build_loop(cfg)
     loop.reset(np.random.default_rng(cfg.seed))
     task = loop.task
@@ -163,7 +171,8 @@ def test_locate_finds_the_end_and_seats_at_forges_difficulty(
 def test_an_approach_that_never_gets_going_is_a_stall() -> None:
     """The end already on the side as the approach begins (a turn swung it there): the hand
     never follows the command; 0.1 s after the command got going that is a stall, not a push on
-    for the whole approach. A hand that follows is no stall until it slows."""
+    for the whole approach. A hand that follows is no stall until it slows; a hand that sways
+    at speed before the command moves has not followed it."""
     from types import SimpleNamespace
 
     from peg_ctrl.tasks.strategies.locate import SideTouches
@@ -185,6 +194,14 @@ def test_an_approach_that_never_gets_going_is_a_stall() -> None:
     assert not any(free._stalled(SimpleNamespace(t=t)) for t in (1.0, 1.05, 1.2))
     free.task.hand_velocity = np.array([0.002, 0.0, 0.0])
     assert free._stalled(SimpleNamespace(t=1.21))
+    # The hand still swaying from the move before, at speed along the approach while the command
+    # has not got going: not yet following it. A dip of the sway as the command starts is no stall.
+    swaying = touches(0.008)
+    swaying._target = SimpleNamespace(v_world=np.array([0.001, 0.0, 0.0]))
+    assert not swaying._stalled(SimpleNamespace(t=1.0)) and not swaying._at_speed
+    swaying._target = SimpleNamespace(v_world=np.array([0.008, 0.0, 0.0]))
+    swaying.task.hand_velocity = np.array([0.002, 0.0, 0.0])
+    assert not swaying._stalled(SimpleNamespace(t=1.01))
 
 
 @pytest.mark.parametrize(
@@ -217,3 +234,42 @@ def test_turn_speed_zero_is_the_tasks_limit_and_negative_is_refused() -> None:
     )
     with pytest.raises(ConfigError, match=r"^task\.strategy\.turn_speed must be >= 0, got -1\.0$"):
         episode_config_from_mapping(data)
+
+
+@pytest.mark.slow  # the search and the centring of one held insertion each, ~8 s of simulation
+@pytest.mark.parametrize("reanchor", [False, True])
+def test_every_push_of_the_centring_reaches_its_wall(reanchor: bool) -> None:
+    """The centring pushes the end in the bore's mouth along +x, -x, +y, -y. Reversing a push
+    keeps that axis force-controlled, and the contact loop goes on from its command, pressed
+    into the wall just found: without ``centre_reanchor`` the hand stands still there and a wall
+    is read where there is none (the true end well inside the bore, and the centre off by tens of
+    micrometres). With it, every reading has the true end at a wall (the bore's radial clearance
+    from its axis, to 10 micrometres), and the descent starts within 20 micrometres of the axis."""
+    strategy = {"side_touches": 3, "quick_datum": True, "side_backoff": 0.0025, "touch_speed": 0.005}
+    cfg = _forge_difficulty(
+        {**strategy, "centre_reanchor": reanchor}, 3.0, seed=13, friction=0.3, clearance=5e-5
+    )
+    loop = build_loop(cfg)
+    loop.reset(np.random.default_rng(cfg.seed))
+    task = loop.task
+    clearance = cfg.scene.assets.clearance
+
+    def off_axis() -> float:  # the true end from the bore's true axis [m]
+        bottom = loop.peg.bottom_world
+        return math.hypot(bottom[0] - task.insertion.hole_x, bottom[1] - task.insertion.hole_y)  # type: ignore[attr-defined]
+
+    at_walls: list[float] = []
+    while task.phase != "insert":  # type: ignore[attr-defined]
+        assert not loop.step().done
+        centring = task.strategy.centring  # type: ignore[attr-defined]
+        if centring is not None and len(centring.walls) > len(at_walls):
+            at_walls.append(off_axis())
+    assert len(at_walls) == 4
+    t0 = loop.data.time
+    while loop.data.time < t0 + 0.15:  # the relax dwell and the move onto the axis
+        loop.step()
+    if reanchor:
+        assert min(at_walls) > clearance - 1e-5, at_walls
+        assert off_axis() < 2e-5
+    else:
+        assert min(at_walls) < clearance - 1e-5, at_walls
