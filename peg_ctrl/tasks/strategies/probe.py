@@ -33,7 +33,10 @@ Phases:
 - ``probe``: landings and bearing presses, as above, until the lower end is believed in the bore
   (a landing on the believed axis goes on down it);
 - ``centre``: the lower end, in the bore's mouth, pushed against its walls along +x, -x, +y,
-  -y in turn (the stops read from the pose); the bore's axis is midway between them;
+  -y in turn (the stops read from the pose); the bore's axis is midway between them. A push
+  that reverses the one before starts from the contact loop's command, still pressed into the
+  wall just found, unless ``centre_reanchor`` (then from where the hand is: without it the
+  hand can stand still at the old wall and be read there, docs/contact_real.md);
 - ``insert``: ``relax_time`` still on that axis, then a jerk-limited descent at
   ``insert_speed`` to ``seat_margin`` below the seated depth, the pose tracked on every axis (a
   peg centred and upright in its bore touches no wall; with the lateral forces free the contact
