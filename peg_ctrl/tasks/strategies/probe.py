@@ -121,9 +121,7 @@ class ProbeConfig(StrategyConfig):
     wall_force: float = 3.0  # centring: the lateral push that finds each wall of the bore's mouth
     centre_time: float = 1.0  # budget of the centring
     centre_in_mouth: bool = True  # the bore's axis from its walls (else down from where the end entered)
-    centre_reanchor: bool = (
-        False  # a reversed push starts from where the hand is (else from its pressed command)
-    )
+    centre_reanchor: bool = False  # a reversed centring push starts from where the hand is
     relax_time: float = 0.05  # on the bore's axis, still first
     insert_speed: float = 0.08  # the descent into the bore
     insert_accel: float = 2.0
@@ -660,16 +658,17 @@ class Centring:
         if n == 2:  # the x walls found: over to the middle between them
             p[0] += 0.5 * (self.walls[0][0] + self.walls[1][0]) - self.task.believed_bottom(obs)[0]
         self._p = p if n != 3 else self._p
-        if n % 2 and self.cfg.centre_reanchor and not self._reanchored:
-            held = self._p.copy()
-            held[n // 2] = obs.gripper.p_world[n // 2]
-            self._target = GripperTarget.trusted(
-                held, self.strategy.quat_upright, np.zeros(3), np.zeros(3), 0.0
-            )
-            self._reanchored = True
-            return
+        anchor = self._p
+        if n % 2 and self.cfg.centre_reanchor:
+            anchor = self._p.copy()
+            anchor[n // 2] = obs.gripper.p_world[n // 2]  # along the push: where the hand is
+            if not self._reanchored:
+                quat = self.strategy.quat_upright
+                self._target = GripperTarget.trusted(anchor, quat, np.zeros(3), np.zeros(3), 0.0)
+                self._reanchored = True
+                return
         self._reanchored = False
-        self._wall = WallPush(self.strategy, obs, self._p, self.strategy.quat_upright, self._DIRECTIONS[n])
+        self._wall = WallPush(self.strategy, obs, anchor, self.strategy.quat_upright, self._DIRECTIONS[n])
         self._target = self._wall.target
 
     def step(self, obs: Observation) -> None:

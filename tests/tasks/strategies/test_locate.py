@@ -241,10 +241,12 @@ def test_turn_speed_zero_is_the_tasks_limit_and_negative_is_refused() -> None:
 def test_every_push_of_the_centring_reaches_its_wall(reanchor: bool) -> None:
     """The centring pushes the end in the bore's mouth along +x, -x, +y, -y. Reversing a push
     keeps that axis force-controlled, and the contact loop goes on from its command, pressed
-    into the wall just found: without ``centre_reanchor`` the hand stands still there and a wall
-    is read where there is none (the true end well inside the bore, and the centre off by tens of
-    micrometres). With it, every reading has the true end at a wall (the bore's radial clearance
-    from its axis, to 10 micrometres), and the descent starts within 20 micrometres of the axis."""
+    into the wall just found: without ``centre_reanchor`` (the default, which the committed
+    studies ran) the hand can stand still there and a wall is read where there is none, the true
+    end well inside the bore. With it, every reading has the true end at a wall: the bore's radial
+    clearance from its axis, to 10 micrometres (the contact gives a few). The
+    descent then starts within 20 micrometres of the axis: the midpoint of readings that each
+    average 20 ms of a 0.03 mm pose noise (7 micrometres), and the hand's wander."""
     strategy = {"side_touches": 3, "quick_datum": True, "side_backoff": 0.0025, "touch_speed": 0.005}
     cfg = _forge_difficulty(
         {**strategy, "centre_reanchor": reanchor}, 3.0, seed=13, friction=0.3, clearance=5e-5
@@ -269,7 +271,7 @@ def test_every_push_of_the_centring_reaches_its_wall(reanchor: bool) -> None:
     while loop.data.time < t0 + 0.15:  # the relax dwell and the move onto the axis
         loop.step()
     if reanchor:
-        assert min(at_walls) > clearance - 1e-5, at_walls
+        assert clearance - 1e-5 < min(at_walls) <= max(at_walls) < clearance + 1e-5, at_walls
         assert off_axis() < 2e-5
     else:
         assert min(at_walls) < clearance - 1e-5, at_walls
