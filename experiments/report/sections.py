@@ -320,13 +320,19 @@ def header_section(
         took = f" Run time {seconds:.0f} s" + (
             f" over {invocations} invocations." if invocations > 1 else "."
         )
+    physics = exp.get("physics", {})
+    friction = physics.get("friction_time")
+    profile = f"`{physics.get('profile', 'seed')}`" + (
+        f" with the peg's friction time constant {friction * 1e3:g} ms (`physics.friction_time`)"
+        if friction is not None
+        else ""
+    )
     return [
         f"# Experiment report: {exp.get('name', default_name)}",
         "",
         f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
         f"planners {', '.join(exp.get('planners', []))}; clearances "
-        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile "
-        f"`{exp.get('physics', {}).get('profile', 'seed')}`." + took,
+        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile {profile}." + took,
         "",
     ]
 

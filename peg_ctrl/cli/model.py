@@ -28,6 +28,6 @@ def run(args: argparse.Namespace) -> int:
     from peg_ctrl.sim.scene import export_scene
 
     cfg = episode_config_from_mapping(episode_mapping(args))
-    path = export_scene(prepare_output_dir(args.out), cfg.scene, cfg.physics.profile)
+    path = export_scene(prepare_output_dir(args.out), cfg.scene, cfg.physics.resolved())
     print(f"wrote {path} (open it with: python -m mujoco.viewer --mjcf={path})")
     return 0

@@ -25,6 +25,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action="append",
         metavar="PROFILE",
     )
+    p.add_argument(
+        "--friction-time",
+        type=float,
+        metavar="SECONDS",
+        help="also run precision with the peg's friction at this time constant "
+        "(physics.friction_time, docs/physics.md 'Known limits')",
+    )
     p.add_argument("--trials", type=int, default=10, help="pushes per clearance (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start-error draws (default 0)")
     add_out(p, "runs/validity")
@@ -33,9 +40,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the battery and write its report."""
+    import dataclasses
+
+    from peg_ctrl.sim.physics import PhysicsConfig, PhysicsProfile
     from peg_ctrl.tools.validity_report import run_battery
 
-    profiles = args.profile or ["seed", "precision"]  # names checked by the parser (PROFILES)
+    profiles: list[str | PhysicsProfile] = list(args.profile or ["seed", "precision"])  # checked names
+    if args.friction_time is not None:
+        try:
+            slow = PhysicsConfig("precision", friction_time=args.friction_time).resolved()
+        except ConfigError as exc:
+            raise ConfigError(str(exc).replace("physics.friction_time", "--friction-time")) from None
+        name = f"precision, friction {args.friction_time * 1e3:g} ms"
+        profiles.append(dataclasses.replace(slow, name=name))
     if args.trials < 1:
         raise ConfigError(f"--trials must be >= 1, got {args.trials}")
     if args.seed < 0:

@@ -47,7 +47,7 @@ from peg_ctrl.run.result import COST_FIELDS, WALL_CLOCK_FIELDS, EpisodeResult
 from peg_ctrl.sim.assets import AssetParams
 from peg_ctrl.sim.ft_model import FTSensorModel, ft_preset
 from peg_ctrl.sim.jaw import load_default
-from peg_ctrl.sim.physics import PhysicsConfig
+from peg_ctrl.sim.physics import PhysicsConfig, PhysicsProfile
 from peg_ctrl.sim.physics import profile as physics_profile
 from peg_ctrl.sim.scene import SceneConfig, build_model, check_scene
 from peg_ctrl.tasks.base import TaskContext, TaskSpec, insertion_task
@@ -214,7 +214,7 @@ def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
 
 
 @functools.lru_cache(maxsize=8)
-def compiled_model(scene: SceneConfig, physics: str = "seed") -> mujoco.MjModel:
+def compiled_model(scene: SceneConfig, physics: str | PhysicsProfile = "seed") -> mujoco.MjModel:
     """One compiled model per scene and physics profile per process (sweep workers reuse it)."""
     return build_model(scene, physics)
 
@@ -240,7 +240,7 @@ def domain_draw(seed: int, domain: DomainConfig) -> DomainDraw:
 
 def prepare_model(cfg: EpisodeConfig, draw: DomainDraw) -> mujoco.MjModel:
     """A private copy of the scene's model with the domain draw applied."""
-    model = copy.copy(compiled_model(cfg.scene, cfg.physics.profile))
+    model = copy.copy(compiled_model(cfg.scene, cfg.physics.resolved()))
     peg = model.body("peg").id
     model.body_mass[peg] *= draw.peg_mass_scale
     model.body_inertia[peg] *= draw.peg_mass_scale

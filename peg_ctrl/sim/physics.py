@@ -85,6 +85,9 @@ class PegContactParams:
     solref: tuple[float, float] = (0.001, 1.0)  # [s, damping ratio]
     solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 1e-4, 0.5, 2.0)
     margin: float = 0.0  # [m]
+    # The friction rows' own reference [s, damping ratio] (MuJoCo's pair ``solreffriction``);
+    # None: the normal's ``solref`` (``physics.friction_time``, docs/physics.md "Known limits").
+    solreffriction: tuple[float, float] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -219,9 +222,40 @@ def profile(name_or_profile: str | PhysicsProfile, *, where: str = "physics.prof
 
 @dataclasses.dataclass(frozen=True)
 class PhysicsConfig:
-    """``physics.profile``: which :class:`PhysicsProfile` builds the scene."""
+    """``physics.profile``: which :class:`PhysicsProfile` builds the scene.
+
+    ``physics.friction_time`` [s]: the time constant of the peg's friction against the block and
+    the table (the explicit pairs' ``solreffriction``, critically damped), in a profile that has
+    those pairs (``precision``); None keeps the profile's (the normal's ``solref``, 1 ms in
+    ``precision``). A slower friction lets a contact that appears under a fast slide slide at once
+    instead of sticking and kicking the peg off (docs/physics.md, "Known limits"). It is a
+    sensitivity setting: no committed study uses it.
+    """
 
     profile: str = "seed"
+    friction_time: float | None = None
 
     def __post_init__(self) -> None:
-        profile(self.profile)
+        prof = profile(self.profile)
+        t = self.friction_time
+        if t is None:
+            return
+        if prof.pair is None:
+            raise ConfigError(
+                f"physics.friction_time: physics.profile={prof.name} has no explicit peg contact pairs "
+                "to set it on; use physics.profile=precision"
+            )
+        number = not isinstance(t, bool) and isinstance(t, (int, float))
+        if not (number and math.isfinite(t) and t >= 2.0 * prof.timestep):
+            raise ConfigError(
+                f"physics.friction_time must be a time constant of at least two physics steps "
+                f"(>= {2.0 * prof.timestep:g} s), got {t!r}"
+            )
+
+    def resolved(self) -> PhysicsProfile:
+        """The profile as this config builds it: ``profile``, with ``friction_time`` if set."""
+        prof = profile(self.profile)
+        if self.friction_time is None or prof.pair is None:
+            return prof
+        pair = dataclasses.replace(prof.pair, solreffriction=(float(self.friction_time), 1.0))
+        return dataclasses.replace(prof, pair=pair)

@@ -263,6 +263,8 @@ def _add_peg_pairs(spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfil
         pair.friction = [mu, mu, 0.0, 0.0, 0.0]
         pair.solref = list(c.solref)
         pair.solimp = list(c.solimp)
+        if c.solreffriction is not None:
+            pair.solreffriction = list(c.solreffriction)
         pair.margin = c.margin
 
 

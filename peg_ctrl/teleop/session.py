@@ -83,7 +83,7 @@ class TeleopSession:
             physics=physics or PhysicsConfig(),
         )
         self.physics = episode.physics.profile  # the profile's name, as in an episode's summary
-        self.model = compiled_model(self.scene, self.physics)
+        self.model = compiled_model(self.scene, episode.physics.resolved())
         self.controller_name = ctrl_cfg.name
         self.seed = seed
         self.randomize = randomize

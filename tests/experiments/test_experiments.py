@@ -734,3 +734,16 @@ def test_the_report_names_the_task_from_the_data() -> None:
     plain = [{**r, "task": "pick_and_place", "strategy": ""} for r in rows]  # no strategy: from the start
     assert "(successes only): Mann-Whitney U" in "\n".join(comparison_section(plain))
     assert "aligned at the start of the insert (else release) phase" in caption("force_profiles.png", plain)
+
+
+def test_the_header_names_a_friction_time_with_the_profile() -> None:
+    """A run with ``physics.friction_time`` is not the profile's physics: its report says so."""
+    from peg_ctrl.experiments.report.sections import header_section
+
+    rows = [{"controller": "pd"}]
+    plain = header_section({"physics": {"profile": "precision", "friction_time": None}}, "x", rows, None)[2]
+    assert plain.endswith("physics profile `precision`.")
+    slow = header_section({"physics": {"profile": "precision", "friction_time": 0.005}}, "x", rows, None)[2]
+    assert slow.endswith(
+        "physics profile `precision` with the peg's friction time constant 5 ms (`physics.friction_time`)."
+    )

@@ -269,3 +269,30 @@ def test_domain_friction_scale_reaches_the_precision_pairs() -> None:
     np.testing.assert_allclose(model.pair_friction[block, :2], 1.35)
     np.testing.assert_array_equal(model.pair_friction[:, 2:], 0.0)
     np.testing.assert_array_equal(model.pair_friction[table, :2], 1.0)  # the table is not the domain's
+
+
+def test_friction_time_sets_the_peg_pairs_friction_reference(precision_cfg: SceneConfig) -> None:
+    """``physics.friction_time`` gives every peg pair (block parts and table) its own friction
+    reference, critically damped, and leaves the normal's; unset, the friction rows take the
+    normal's (MuJoCo's 0, 0)."""
+    slow = build_model(precision_cfg, PhysicsConfig("precision", friction_time=0.005).resolved())
+    assert slow.npair == _hole_sides(slow) + 4 + 1  # every block part, and the table
+    np.testing.assert_array_equal(slow.pair_solreffriction, np.tile([0.005, 1.0], (slow.npair, 1)))
+    np.testing.assert_array_equal(slow.pair_solref, np.tile([0.001, 1.0], (slow.npair, 1)))
+    plain = build_model(precision_cfg, PhysicsConfig("precision").resolved())
+    np.testing.assert_array_equal(plain.pair_solreffriction, np.zeros((plain.npair, 2)))
+    assert PhysicsConfig("precision").resolved() is PRECISION
+
+
+@pytest.mark.parametrize(
+    ("profile_name", "value", "message"),
+    [
+        ("seed", 0.005, r"^physics\.friction_time: physics\.profile=seed has no explicit peg contact pairs"),
+        ("precision", 0.0005, r"^physics\.friction_time must be .* \(>= 0\.001 s\), got 0\.0005$"),
+        ("precision", math.inf, r"^physics\.friction_time must be .*, got inf$"),
+        ("precision", True, r"^physics\.friction_time must be .*, got True$"),
+    ],
+)
+def test_friction_time_refuses_what_it_cannot_set(profile_name: str, value: float, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        PhysicsConfig(profile_name, friction_time=value)

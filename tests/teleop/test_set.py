@@ -32,7 +32,7 @@ def test_scripted_teleop_runs_in_the_precision_profile(
     assert main(["teleop", "--scripted", "--set", "physics.profile=precision", "--out", str(out)]) == 0
     assert capsys.readouterr().out.startswith("teleop ended (")
     config, summary, start = _written(out)
-    assert config["physics"] == {"profile": "precision"}
+    assert config["physics"] == {"profile": "precision", "friction_time": None}
     assert summary["physics"] == start["physics"] == "precision"
     # Every physics step is one of the precision profile's, and the session's limit is simulated
     # time (SPEC §5's 50,000 steps of the seed profile: 50 s), so the script has time to insert.
@@ -46,7 +46,7 @@ def test_the_precision_profile_reaches_the_session(tmp_path: Path, monkeypatch: 
     # 0.1 s of the script: the peg is not inserted, exit code 1
     assert main(["teleop", "--scripted", "--set", "physics.profile=precision", "--out", str(out)]) == 1
     config, summary, start = _written(out)
-    assert config["physics"] == {"profile": "precision"}
+    assert config["physics"] == {"profile": "precision", "friction_time": None}
     assert summary["physics"] == start["physics"] == "precision"
     assert (
         summary["total_timesteps"] == round(0.1 / PRECISION.timestep) == round(summary["sim_time_s"] / 0.0005)
@@ -67,7 +67,7 @@ def test_controller_and_scene_settings_reach_the_session(
     config, summary, start = _written(out)
     assert config["scene"]["assets"]["clearance"] == 0.0005
     assert (config["controller"]["name"], config["controller"]["kp_pos"]) == ("pd", 2000.0)
-    assert config["physics"] == {"profile": "seed"}  # the default
+    assert config["physics"] == {"profile": "seed", "friction_time": None}  # the default
     assert summary["physics"] == start["physics"] == "seed"
     assert summary["total_timesteps"] == 100
 

@@ -19,6 +19,8 @@ from ..conftest import assert_one_line_error, peg_sim, peg_sim_here
         (["validity", "--profile", "exact"], "unknown physics profile 'exact'"),
         (["validity", "--trials", "0"], "--trials must be >= 1, got 0"),
         (["validity", "--trials", "many"], "argument --trials: invalid int value"),
+        (["validity", "--friction-time", "0.0001"], "--friction-time must be a time constant of at least"),
+        (["validity", "--friction-time", "soon"], "argument --friction-time: invalid float value"),
     ],
 )
 def test_bad_validity_arguments_fail_in_one_line(tmp_path: Path, argv: list[str], message: str) -> None:
@@ -39,6 +41,21 @@ def test_validity_battery_writes_its_tables_and_plots(tmp_path: Path) -> None:
     assert "| +0.250 | 1/1 |" in md and "| -0.020 | 0/1 |" in md
     for name in ("clearance.png", "force_depth.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow
+def test_validity_battery_runs_precision_with_a_slower_friction_too(tmp_path: Path) -> None:
+    """``--friction-time``: the battery on precision with the peg's friction at that time
+    constant, under its own name; its bars hold (docs/physics.md, "Known limits")."""
+    argv = ["validity", "--profile", "precision", "--friction-time", "0.005", "--trials", "1", "--out", "v"]
+    proc = peg_sim(argv, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "v" / "validity.json").read_text())
+    assert list(data["profiles"]) == ["precision", "precision, friction 5 ms"]
+    slow = data["profiles"]["precision, friction 5 ms"]
+    assert [r["inserted"] for r in slow["clearance"]] == [True, True, True, True, False, False]
+    expected = [r for r in slow["chamfer"] if r["expected_capture"] is not None]
+    assert [r["depth"] > 0.001 for r in expected] == [True, True, True, False, False]  # past the chamfer
 
 
 @pytest.mark.slow
