@@ -102,7 +102,7 @@ def _warm_up(scene_data: dict[str, Any]) -> float:
     from peg_ctrl.run.episode import compiled_model, episode_config_from_mapping
 
     cfg = episode_config_from_mapping(scene_data)
-    compiled_model(cfg.scene, cfg.physics.profile)
+    compiled_model(cfg.scene, cfg.physics.resolved())
     return time.perf_counter() - t0
 
 

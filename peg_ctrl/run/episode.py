@@ -213,9 +213,14 @@ def episode_config_from_mapping(data: dict[str, Any]) -> EpisodeConfig:
     return load(EpisodeConfig, data)
 
 
-@functools.lru_cache(maxsize=8)
 def compiled_model(scene: SceneConfig, physics: str | PhysicsProfile = "seed") -> mujoco.MjModel:
-    """One compiled model per scene and physics profile per process (sweep workers reuse it)."""
+    """One compiled model per scene and physics profile per process (sweep workers reuse it); a
+    profile's name and the profile itself are the same model."""
+    return _compiled_model(scene, physics_profile(physics))
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled_model(scene: SceneConfig, physics: PhysicsProfile) -> mujoco.MjModel:
     return build_model(scene, physics)
 
 
