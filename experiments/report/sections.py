@@ -334,7 +334,58 @@ def header_section(
         f"planners {', '.join(exp.get('planners', []))}; clearances "
         f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile {profile}." + took,
         "",
+        sensing_line(exp),
+        "",
     ]
+
+
+_FT_KEYS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift", "ft_rate")
+
+
+def _gridded(grid: dict[str, Any]) -> set[str]:
+    """The config keys a grid sweeps, its linked groups' included."""
+    keys: set[str] = set()
+    for key, values in grid.items():
+        keys |= set(values) if isinstance(values, dict) else {key}
+    return keys
+
+
+def sensing_line(exp: dict[str, Any]) -> str:
+    """What the arms sensed, from the experiment's ``domain`` and ``task`` (docs/sensing.md): the
+    F/T sensor, the hand's position, velocity and orientation, and the hole's observation; a
+    key the grid sweeps is said to vary per cell."""
+    d, task, grid = exp.get("domain", {}), exp.get("task", {}), _gridded(exp.get("grid", {}))
+
+    def sigma(key: str, value: float, scale: float, unit: str) -> str:
+        if key in grid:
+            return "per cell"
+        return f"σ {value * scale:g} {unit}" if value else "exact"
+
+    if "domain.ft_sensor" in grid:
+        ft = "per cell (`domain.ft_sensor`)"
+    elif d.get("ft_sensor"):
+        ft = f"`{d['ft_sensor']}` (a preset)"
+    elif any(d.get(k, 0.0) for k in _FT_KEYS):
+        ft = (
+            f"σ {d.get('force_noise', 0.0):g} N and {d.get('torque_noise', 0.0):g} N m, "
+            f"{d.get('ft_latency', 0.0) * 1e3:g} ms late, bias drift {d.get('ft_bias_drift', 0.0):g} N/√s, "
+            + (f"{d['ft_rate']:g} Hz" if d.get("ft_rate") else "read every control period")
+        )
+    else:
+        ft = "ideal"
+    hand = ", ".join(
+        f"{name} {sigma('domain.' + key, d.get(key, 0.0), scale, unit)}"
+        for name, key, scale, unit in (
+            ("position", "position_noise", 1e3, "mm"),
+            ("velocity", "velocity_noise", 1e3, "mm/s"),
+            ("orientation", "orientation_noise", 1e3, "mrad"),
+        )
+    )
+    hole = sigma("task.position_noise", task.get("position_noise", 0.0), 1e3, "mm per axis")
+    return (
+        f"Sensed (docs/sensing.md): the wrist F/T sensor {ft}; the hand's {hand}; "
+        f"the hole's observed position {hole}."
+    )
 
 
 def summary_section(summary: list[dict[str, Any]]) -> list[str]:

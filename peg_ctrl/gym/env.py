@@ -82,8 +82,9 @@ Other keyword arguments of ``gymnasium.make``
     ``controller`` (name or mapping, default ``pd``); ``profile`` (physics profile, default
     ``seed``); ``disturbances`` (a mapping of :class:`~peg_ctrl.run.episode.DomainConfig` fields:
     ``peg_mass_scale``, ``friction_scale``, ``gain_scale`` ranges drawn per episode;
-    ``position_noise`` [m] and ``velocity_noise`` [m/s, rad/s] on the sensed state; the wrist
-    F/T sensor as a preset ``ft_sensor`` (``ideal``, ``wrist``, ``mini45``, ``forge``) or by its fields
+    ``position_noise`` [m], ``velocity_noise`` [m/s, rad/s] and ``orientation_noise`` [rad] on
+    the sensed state; the wrist F/T sensor as a preset ``ft_sensor`` (``ideal``, ``wrist``,
+    ``mini45``, ``forge``) or by its fields
     ``force_noise`` [N] (the forces only: it used to cover the torques too, which now take
     ``torque_noise``), ``torque_noise`` [N m], ``ft_latency`` [s], ``ft_bias_drift``
     [N/sqrt(s)] and ``ft_rate`` [Hz], see docs/sensing.md); ``scene`` (a

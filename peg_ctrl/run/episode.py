@@ -85,7 +85,7 @@ class DomainConfig:
     the sensors' noise.
 
     The wrist force/torque sensor is either a preset (``ft_sensor``, see
-    :data:`~peg_ctrl.sim.ft_model.FT_PRESETS`) or the four fields ``force_noise``,
+    :data:`~peg_ctrl.sim.ft_model.FT_PRESETS`) or the five fields ``force_noise``,
     ``torque_noise``, ``ft_latency``, ``ft_bias_drift`` and ``ft_rate`` (:class:`FTSensorModel`'s, see
     docs/sensing.md); :attr:`ft_model` is the model in effect.
     """
@@ -95,6 +95,7 @@ class DomainConfig:
     gain_scale: tuple[float, float] = (1.0, 1.0)  # factor on each of the controller's GAINS
     position_noise: float = 0.0  # std of noise on the measured gripper position [m]
     velocity_noise: float = 0.0  # std of noise on the measured gripper velocity [m/s, rad/s]
+    orientation_noise: float = 0.0  # std of the measured gripper orientation's error about each axis [rad]
     force_noise: float = 0.0  # std of noise on each F/T force channel [N] (torques: torque_noise)
     torque_noise: float = 0.0  # std of noise on each F/T torque channel [N m]
     ft_latency: float = 0.0  # the F/T reading arrives this late [s]
@@ -107,7 +108,7 @@ class DomainConfig:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
                 raise ConfigError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
-        for name in ("position_noise", "velocity_noise", *_FT_FIELDS):
+        for name in ("position_noise", "velocity_noise", "orientation_noise", *_FT_FIELDS):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"domain.{name} must be finite and >= 0, got {value!r}")
@@ -136,7 +137,8 @@ class DomainConfig:
     @property
     def noisy(self) -> bool:
         """Whether any sensor noise is on (an ``ideal`` F/T preset is none)."""
-        return self.position_noise > 0 or self.velocity_noise > 0 or self.ft_model.noisy
+        kinematic = (self.position_noise, self.velocity_noise, self.orientation_noise)
+        return any(v > 0 for v in kinematic) or self.ft_model.noisy
 
     @property
     def random(self) -> bool:
@@ -281,6 +283,7 @@ def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> L
         noise = SensorNoise(
             position=d.position_noise,
             velocity=d.velocity_noise,
+            orientation=d.orientation_noise,
             ft=d.ft_model,
             dt=cfg.controller.control_dt,  # one F/T reading per control period
             rng=np.random.default_rng([cfg.seed, 2]),

@@ -47,8 +47,9 @@ __all__ = ["Loop", "LoopOutcome", "StepInfo", "Recorder", "SensorNoise", "LoopTi
 class SensorNoise:
     """The gripper state as its sensors report it, one reading per control period ``dt`` [s]:
     zero-mean Gaussian noise of standard deviation ``position`` [m] on the position and
-    ``velocity`` [m/s] (and [rad/s]) on the velocities (drawn when either is on), and the wrist
-    force/torque reading through the sensor model ``ft``
+    ``velocity`` [m/s] (and [rad/s]) on the velocities (drawn when either is on), a rotation of
+    standard deviation ``orientation`` [rad] about each of the gripper's axes on its orientation
+    (drawn when it is on), and the wrist force/torque reading through the sensor model ``ft``
     (:class:`~peg_ctrl.sim.ft_model.FTSensorStream`: noise per channel, latency, bias drift);
     everything drawn from ``rng``, in that order.
 
@@ -56,9 +57,16 @@ class SensorNoise:
     """
 
     def __init__(
-        self, *, position: float, velocity: float, ft: FTSensorModel, dt: float, rng: np.random.Generator
+        self,
+        *,
+        position: float,
+        velocity: float,
+        ft: FTSensorModel,
+        dt: float,
+        rng: np.random.Generator,
+        orientation: float = 0.0,
     ) -> None:
-        self.position, self.velocity = position, velocity
+        self.position, self.velocity, self.orientation = position, velocity, orientation
         self.rng = rng
         self.ft = FTSensorStream(ft, dt=dt, rng=rng)
         self._kinematic = position > 0 or velocity > 0
@@ -74,6 +82,10 @@ class SensorNoise:
                 v_world=s.v_world + rng.normal(0.0, self.velocity, 3),
                 omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3),
             )
+        if self.orientation > 0:
+            q = s.quat_world.copy()
+            mujoco.mju_quatIntegrate(q, self.rng.normal(0.0, self.orientation, 3), 1.0)  # gripper frame
+            s = s._replace(quat_world=q)
         return s._replace(ft_wrench=self.ft.apply(s.ft_wrench))
 
 

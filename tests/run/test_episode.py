@@ -341,6 +341,8 @@ def test_the_ft_model_is_the_preset_or_the_five_fields() -> None:
     )
     with pytest.raises(ConfigError, match=r"^domain\.ft_rate must be finite and >= 0, got -1\.0$"):
         DomainConfig(ft_rate=-1.0)
+    with pytest.raises(ConfigError, match=r"^domain\.orientation_noise must be finite and >= 0, got nan$"):
+        DomainConfig(orientation_noise=float("nan"))
     with pytest.raises(ConfigError, match=r"^domain\.ft_rate: set either domain\.ft_sensor"):
         DomainConfig(ft_sensor="wrist", ft_rate=100.0)
 
@@ -356,6 +358,7 @@ def test_the_ft_model_is_the_preset_or_the_five_fields() -> None:
         ({"ft_latency": 0.01}, True),
         ({"ft_bias_drift": 0.01}, True),
         ({"velocity_noise": 0.01}, True),
+        ({"orientation_noise": 1e-4}, True),
     ],
 )
 def test_any_sensor_noise_makes_the_seed_matter(domain: dict, noisy: bool) -> None:

@@ -239,6 +239,51 @@ def test_the_same_force_and_torque_noise_is_the_old_single_sigma_draw_for_draw(m
             np.testing.assert_array_equal(getattr(got, name), getattr(expected, name), err_msg=name)
 
 
+def test_the_orientation_reads_a_rotation_of_sigma_about_each_gripper_axis(model: mujoco.MjModel) -> None:
+    """Each reading turns the true orientation by a rotation drawn with standard deviation
+    ``orientation`` about each of the gripper's axes; nothing else in the reading moves."""
+    sigma = 2e-4
+    rng = np.random.default_rng(3)
+    noise = SensorNoise(position=0.0, velocity=0.0, orientation=sigma, ft=FTSensorModel(), dt=0.001, rng=rng)
+    loop = make(model)
+    loop.reset(np.random.default_rng(0))
+    state = loop.state()
+    noise.reset(state)
+    q_true = state.quat_world
+    errors = []
+    for _ in range(4000):
+        got = noise.apply(state)
+        assert np.linalg.norm(got.quat_world) == pytest.approx(1.0, abs=1e-12)
+        for name in ("p_world", "v_world", "omega_body", "ft_wrench"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(state, name), err_msg=name)
+        dq = np.empty(4)
+        mujoco.mju_negQuat(dq, q_true)
+        mujoco.mju_mulQuat(dq, dq, got.quat_world)  # the error in the gripper frame
+        w = np.empty(3)
+        mujoco.mju_quat2Vel(w, dq, 1.0)
+        errors.append(w)
+    e = np.array(errors)
+    np.testing.assert_allclose(e.std(axis=0), sigma, rtol=0.06)
+    np.testing.assert_allclose(e.mean(axis=0), 0.0, atol=4 * sigma / np.sqrt(len(e)))
+
+
+def test_no_orientation_noise_draws_nothing(model: mujoco.MjModel) -> None:
+    """``orientation`` 0 (the default) leaves the readings draw for draw as before it existed."""
+    ft = FT_PRESETS["wrist"]
+    kw = {"position": 1e-4, "velocity": 1e-3, "ft": ft, "dt": 0.001}
+    plain = SensorNoise(**kw, rng=np.random.default_rng(9))
+    zero = SensorNoise(**kw, rng=np.random.default_rng(9), orientation=0.0)
+    loop = make(model)
+    loop.reset(np.random.default_rng(0))
+    state = loop.state()
+    plain.reset(state)
+    zero.reset(state)
+    for _ in range(50):
+        a, b = plain.apply(state), zero.apply(state)
+        for name in ("p_world", "quat_world", "v_world", "omega_body", "ft_wrench"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
 class Believing(TrackingTask):
     """Tracks home while its belief changes: ``beliefs[k]`` during control step k (from 1)."""
 
