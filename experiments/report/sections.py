@@ -352,17 +352,20 @@ def _gridded(grid: dict[str, Any]) -> set[str]:
 
 def sensing_line(exp: dict[str, Any]) -> str:
     """What the arms sensed, from the experiment's ``domain`` and ``task`` (docs/sensing.md): the
-    F/T sensor, the hand's position, velocity and orientation, and the hole's observation; a
-    key the grid sweeps is said to vary per cell."""
-    d, task, grid = exp.get("domain", {}), exp.get("task", {}), _gridded(exp.get("grid", {}))
+    F/T sensor, the hand's position, velocity and orientation, the camera's noise on the hole and
+    the drawing's tolerance; a key the grid sweeps is said to vary per cell. An experiment that
+    does not record its ``domain`` says so."""
+    if "domain" not in exp:
+        return "Sensed (docs/sensing.md): not recorded with these results."
+    d, task, grid = exp["domain"], exp.get("task", {}), _gridded(exp.get("grid", {}))
 
-    def sigma(key: str, value: float, scale: float, unit: str) -> str:
+    def sigma(key: str, value: float, scale: float, unit: str, none: str = "exact") -> str:
         if key in grid:
             return "per cell"
-        return f"σ {value * scale:g} {unit}" if value else "exact"
+        return f"σ {value * scale:g} {unit}" if value else none
 
-    if "domain.ft_sensor" in grid:
-        ft = "per cell (`domain.ft_sensor`)"
+    if "domain.ft_sensor" in grid or any(f"domain.{k}" in grid for k in _FT_KEYS):
+        ft = "per cell (the grid sweeps it)"
     elif d.get("ft_sensor"):
         ft = f"`{d['ft_sensor']}` (a preset)"
     elif any(d.get(k, 0.0) for k in _FT_KEYS):
@@ -373,18 +376,25 @@ def sensing_line(exp: dict[str, Any]) -> str:
         )
     else:
         ft = "ideal"
-    hand = ", ".join(
-        f"{name} {sigma('domain.' + key, d.get(key, 0.0), scale, unit)}"
-        for name, key, scale, unit in (
-            ("position", "position_noise", 1e3, "mm"),
-            ("velocity", "velocity_noise", 1e3, "mm/s"),
-            ("orientation", "orientation_noise", 1e3, "mrad"),
-        )
+    v = d.get("velocity_noise", 0.0)
+    velocity = sigma("domain.velocity_noise", v, 1e3, f"mm/s ({v * 1e3:g} mrad/s)")
+    hand = (
+        f"position {sigma('domain.position_noise', d.get('position_noise', 0.0), 1e3, 'mm')}, "
+        f"velocity {velocity}, "
+        f"orientation {sigma('domain.orientation_noise', d.get('orientation_noise', 0.0), 1e3, 'mrad')}"
     )
-    hole = sigma("task.position_noise", task.get("position_noise", 0.0), 1e3, "mm per axis")
+    hole = sigma("task.position_noise", task.get("position_noise", 0.0), 1e3, "mm per axis", "none")
+    tolerance = task.get("drawing_tolerance", 0.0)
+    drawing = (
+        "per cell"
+        if "task.drawing_tolerance" in grid
+        else f"±{tolerance * 1e3:g} mm"
+        if tolerance
+        else "exact"
+    )
     return (
-        f"Sensed (docs/sensing.md): the wrist F/T sensor {ft}; the hand's {hand}; "
-        f"the hole's observed position {hole}."
+        f"Sensed (docs/sensing.md): the wrist F/T sensor {ft}; the hand's {hand}; the camera's "
+        f"noise on the hole's position {hole}; the drawing {drawing}."
     )
 
 

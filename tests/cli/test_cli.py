@@ -127,8 +127,8 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
             ["sweep", "nope"],
             "no shipped experiment has that name; shipped: clearance, contact, contact_hard, "
             "contact_hard_offgrid, contact_real, contact_real_descent, contact_real_friction5, "
-            "contact_real_offgrid, contact_real_offgrid_friction5, contact_real_orientation, guarded, plan, "
-            "quick",
+            "contact_real_offgrid, contact_real_offgrid_friction5, contact_real_offgrid_orientation, "
+            "contact_real_orientation, guarded, plan, quick",
         ),
         (["sweep", "quick", "--workers", "0"], "--workers must be >= 1, got 0"),
         (["sweep", "quick", "--dry-run", "--workers", "-1"], "--workers must be >= 1, got -1"),
@@ -403,6 +403,7 @@ def test_sweep_lists_the_shipped_experiments(capsys: pytest.CaptureFixture[str])
         "contact_real_friction5",
         "contact_real_offgrid",
         "contact_real_offgrid_friction5",
+        "contact_real_offgrid_orientation",
         "contact_real_orientation",
         "guarded",
         "plan",

@@ -751,18 +751,20 @@ def test_the_header_names_a_friction_time_with_the_profile() -> None:
 
 def test_the_header_says_what_the_arms_sensed() -> None:
     """Every report names its sensor model: the F/T sensor, the hand's position, velocity and
-    orientation, the hole's observation; a key the grid sweeps varies per cell."""
+    orientation, the camera's noise on the hole, the drawing; a key the grid sweeps varies per
+    cell, and results without a recorded domain say so."""
     from peg_ctrl.experiments.report.sections import header_section
 
     rows = [{"controller": "pd"}]
     real = {
         "domain": {"position_noise": 3e-5, "velocity_noise": 0.001, "ft_sensor": ""},
-        "task": {"position_noise": 0.0},
+        "task": {"position_noise": 0.0, "drawing_tolerance": 1.5e-4},
         "grid": {"sensor": {"domain.ft_sensor": ["wrist", "forge"], "task.position_noise": [5e-4, 1e-3]}},
     }
     assert header_section(real, "x", rows, None)[4] == (
-        "Sensed (docs/sensing.md): the wrist F/T sensor per cell (`domain.ft_sensor`); the hand's position "
-        "σ 0.03 mm, velocity σ 1 mm/s, orientation exact; the hole's observed position per cell."
+        "Sensed (docs/sensing.md): the wrist F/T sensor per cell (the grid sweeps it); the hand's "
+        "position σ 0.03 mm, velocity σ 1 mm/s (1 mrad/s), orientation exact; the camera's noise on "
+        "the hole's position per cell; the drawing ±0.15 mm."
     )
     fields = {
         "domain": {
@@ -777,10 +779,16 @@ def test_the_header_says_what_the_arms_sensed() -> None:
     }
     assert header_section(fields, "x", rows, None)[4] == (
         "Sensed (docs/sensing.md): the wrist F/T sensor σ 0.5 N and 0.005 N m, 5 ms late, bias drift "
-        "0.005 N/√s, 100 Hz; the hand's position exact, velocity exact, orientation σ 0.1 mrad; the hole's "
-        "observed position σ 0.75 mm per axis."
+        "0.005 N/√s, 100 Hz; the hand's position exact, velocity exact, orientation σ 0.1 mrad; the "
+        "camera's noise on the hole's position σ 0.75 mm per axis; the drawing exact."
     )
+    swept = {**fields, "grid": {"domain.ft_latency": [0.0, 0.01], "domain.orientation_noise": [0.0, 1e-4]}}
+    line = header_section(swept, "x", rows, None)[4]
+    assert "F/T sensor per cell (the grid sweeps it);" in line and "orientation per cell;" in line
     assert header_section({"domain": {"ft_sensor": "wrist"}}, "x", rows, None)[4].startswith(
         "Sensed (docs/sensing.md): the wrist F/T sensor `wrist` (a preset); the hand's position exact"
     )
-    assert "F/T sensor ideal;" in header_section({}, "x", rows, None)[4]
+    assert "F/T sensor ideal;" in header_section({"domain": {}}, "x", rows, None)[4]
+    assert (
+        header_section({}, "x", rows, None)[4] == "Sensed (docs/sensing.md): not recorded with these results."
+    )

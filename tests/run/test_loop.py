@@ -241,7 +241,8 @@ def test_the_same_force_and_torque_noise_is_the_old_single_sigma_draw_for_draw(m
 
 def test_the_orientation_reads_a_rotation_of_sigma_about_each_gripper_axis(model: mujoco.MjModel) -> None:
     """Each reading turns the true orientation by a rotation drawn with standard deviation
-    ``orientation`` about each of the gripper's axes; nothing else in the reading moves."""
+    ``orientation`` about each axis; nothing else in the reading moves. (An isotropic rotation
+    reads the same in the gripper's frame and the world's: the frame is the draw-order test's.)"""
     sigma = 2e-4
     rng = np.random.default_rng(3)
     noise = SensorNoise(position=0.0, velocity=0.0, orientation=sigma, ft=FTSensorModel(), dt=0.001, rng=rng)
@@ -267,21 +268,42 @@ def test_the_orientation_reads_a_rotation_of_sigma_about_each_gripper_axis(model
     np.testing.assert_allclose(e.mean(axis=0), 0.0, atol=4 * sigma / np.sqrt(len(e)))
 
 
-def test_no_orientation_noise_draws_nothing(model: mujoco.MjModel) -> None:
-    """``orientation`` 0 (the default) leaves the readings draw for draw as before it existed."""
-    ft = FT_PRESETS["wrist"]
-    kw = {"position": 1e-4, "velocity": 1e-3, "ft": ft, "dt": 0.001}
-    plain = SensorNoise(**kw, rng=np.random.default_rng(9))
-    zero = SensorNoise(**kw, rng=np.random.default_rng(9), orientation=0.0)
+def test_orientation_noise_draws_after_the_velocities_and_only_when_on(model: mujoco.MjModel) -> None:
+    """With ``orientation`` 0 a reading draws position, velocities and the F/T noise, in that
+    order, as before the field existed (the reference below is that formula); with it on, three
+    draws for the orientation come between the velocities and the F/T sensor's."""
+    position, velocity, force = 1e-4, 1e-3, 0.3
+    ft = FTSensorModel(force_noise=force, torque_noise=force)
     loop = make(model)
     loop.reset(np.random.default_rng(0))
     state = loop.state()
-    plain.reset(state)
-    zero.reset(state)
-    for _ in range(50):
-        a, b = plain.apply(state), zero.apply(state)
+    off = SensorNoise(position=position, velocity=velocity, ft=ft, dt=0.001, rng=np.random.default_rng(9))
+    on = SensorNoise(
+        position=position, velocity=velocity, ft=ft, dt=0.001, rng=np.random.default_rng(9), orientation=1e-4
+    )
+    rng = np.random.default_rng(9)
+    ref = np.random.default_rng(9)
+    for _ in range(20):
+        expected = state._replace(
+            p_world=state.p_world + rng.normal(0.0, position, 3),
+            v_world=state.v_world + rng.normal(0.0, velocity, 3),
+            omega_body=state.omega_body + rng.normal(0.0, velocity, 3),
+            ft_wrench=state.ft_wrench + rng.normal(0.0, force, 6),
+        )
+        got = off.apply(state)
         for name in ("p_world", "quat_world", "v_world", "omega_body", "ft_wrench"):
-            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+            np.testing.assert_array_equal(getattr(got, name), getattr(expected, name), err_msg=name)
+        p, v, w = (ref.normal(0.0, s, 3) for s in (position, velocity, velocity))
+        turn = ref.normal(0.0, 1e-4, 3)
+        wrench = state.ft_wrench + ref.normal(0.0, force, 6)
+        turned = state.quat_world.copy()
+        mujoco.mju_quatIntegrate(turned, turn, 1.0)
+        got = on.apply(state)
+        np.testing.assert_array_equal(got.p_world, state.p_world + p)
+        np.testing.assert_array_equal(got.v_world, state.v_world + v)
+        np.testing.assert_array_equal(got.omega_body, state.omega_body + w)
+        np.testing.assert_array_equal(got.quat_world, turned)
+        np.testing.assert_array_equal(got.ft_wrench, wrench)
 
 
 class Believing(TrackingTask):
