@@ -542,6 +542,7 @@ def _result(
         controller=cfg.controller.name,
         planner=cfg.planner,
         physics=cfg.physics.profile,
+        friction_time_s=cfg.physics.friction_time,
         task=cfg.task.name,
         strategy=strategy_name(cfg.task),
         seed=cfg.seed,

@@ -253,6 +253,8 @@ class EpisodeResult:
     solve_real_time_factor: float | None = field(default=None, metadata=metric(wall_clock=True, cost=True))
     solver_timing: dict[str, dict[str, float]] = field(default_factory=dict, metadata=metric(wall_clock=True))
     phantom_contacts: int = 0  # physics steps whose collider returned a phantom (loop.PhantomGuard)
+    # The peg's friction time constant set on the profile (physics.friction_time) [s]; None: the profile's.
+    friction_time_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -269,8 +271,13 @@ class EpisodeResult:
             if self.insertion_depth_m is not None
             else "peg not at the hole"
         )
+        physics = f"{self.physics} physics" + (
+            f", the peg's friction time {self.friction_time_s * 1e3:g} ms"
+            if self.friction_time_s is not None
+            else ""
+        )
         return (
-            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({task}, {self.physics} physics), "
+            f"{head}: {self.controller}+{self.planner} seed {self.seed} ({task}, {physics}), "
             f"{self.total_timesteps} steps "
             f"({self.sim_time_s:.2f} s sim, {self.wall_time_s:.1f} s wall){tti}, "
             f"{depth}, peak peg-block force {self.peak_contact_force_n:.2f} N"

@@ -83,6 +83,7 @@ class TeleopSession:
             physics=physics or PhysicsConfig(),
         )
         self.physics = episode.physics.profile  # the profile's name, as in an episode's summary
+        self.friction_time = episode.physics.friction_time  # the peg's, when set (physics.friction_time)
         self.model = compiled_model(self.scene, episode.physics.resolved())
         self.controller_name = ctrl_cfg.name
         self.seed = seed
@@ -255,6 +256,7 @@ class TeleopSession:
             "controller": self.controller_name,
             "planner": "teleop",
             "physics": self.physics,
+            "friction_time_s": self.friction_time,
             "task": self.task.name,
             "strategy": "",
             "seed": self.seed,

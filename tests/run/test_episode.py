@@ -376,3 +376,16 @@ def test_an_ideal_ft_sensor_is_the_episode_without_domain_settings(tmp_path: Pat
     assert {k: v for k, v in plain.to_dict().items() if k not in skip} == {
         k: v for k, v in same.to_dict().items() if k not in skip
     }
+
+
+def test_the_result_records_the_peg_s_friction_time(tmp_path: Path) -> None:
+    """A run with ``physics.friction_time`` says so in its result, its summary and its line; one
+    without records None (the profile's)."""
+    base = {"physics": {"profile": "precision"}, "max_steps": 40, "log": {"trace": False}}
+    plain = run_episode(episode_config_from_mapping(base), tmp_path / "plain", plot=False)
+    assert plain.friction_time_s is None and "friction time" not in plain.one_line()
+    slow = {**base, "physics": {"profile": "precision", "friction_time": 0.005}}
+    result = run_episode(episode_config_from_mapping(slow), tmp_path / "slow", plot=False)
+    assert result.friction_time_s == 0.005
+    assert json.loads((tmp_path / "slow" / "summary.json").read_text())["friction_time_s"] == 0.005
+    assert "(pick_and_place, precision physics, the peg's friction time 5 ms)" in result.one_line()

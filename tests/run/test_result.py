@@ -54,6 +54,7 @@ COMMITTED_COLUMNS = (
     "solve_period_s",
     "solve_real_time_factor",
     "phantom_contacts",
+    "friction_time_s",
 )
 
 
