@@ -376,6 +376,8 @@ def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:
                 "seed": job.seed,
                 **draw,
                 **{name: s.get(name) for name in record},
+                # The job knows it whether or not the summary (an older run's) records it.
+                "friction_time_s": job.config.physics.friction_time,
                 "log_path": str(Path("episodes") / job.key / "log.jsonl"),
                 **job.cell,
             }

@@ -254,7 +254,7 @@ class EpisodeResult:
     solver_timing: dict[str, dict[str, float]] = field(default_factory=dict, metadata=metric(wall_clock=True))
     phantom_contacts: int = 0  # physics steps whose collider returned a phantom (loop.PhantomGuard)
     # The peg's friction time constant set on the profile (physics.friction_time) [s]; None: the profile's.
-    friction_time_s: float | None = None
+    friction_time_s: float | None = field(default=None, metadata=metric(unit="s"))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

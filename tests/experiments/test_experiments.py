@@ -792,3 +792,22 @@ def test_the_header_says_what_the_arms_sensed() -> None:
     assert (
         header_section({}, "x", rows, None)[4] == "Sensed (docs/sensing.md): not recorded with these results."
     )
+
+
+def test_a_row_takes_the_friction_time_from_its_job_even_from_an_older_summary(tmp_path: Path) -> None:
+    """An episode summary written before ``friction_time_s`` existed still yields the job's
+    friction time in its episodes.csv row (a rebuilt table, a resumed sweep)."""
+    import json
+
+    from peg_ctrl.experiments.runner import collect_rows
+
+    exp = {"name": "old", "controllers": ["pd"], "seeds": 2, "physics": {"profile": "precision"}}
+    for physics, expected in (({"profile": "precision", "friction_time": 0.005}, 0.005), (None, None)):
+        jobs = expand(experiment_from_mapping({**exp, **({"physics": physics} if physics else {})}))
+        out = tmp_path / str(expected)
+        for job in jobs:
+            (out / "episodes" / job.key).mkdir(parents=True)
+            summary = {"status": "success", "trace_path": "forces.npz"}  # no friction_time_s
+            (out / "episodes" / job.key / "summary.json").write_text(json.dumps(summary))
+        rows = collect_rows(jobs, out)
+        assert len(rows) == 2 and all(r["friction_time_s"] == expected for r in rows)
