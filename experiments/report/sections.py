@@ -22,6 +22,7 @@ from peg_ctrl.experiments.stats import (
     wilson_interval,
 )
 from peg_ctrl.run.result import COST_FIELDS, summarised
+from peg_ctrl.sim.ft_model import FT_DOMAIN_FIELDS
 
 __all__ = [
     "header_section",
@@ -339,9 +340,6 @@ def header_section(
     ]
 
 
-_FT_KEYS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift", "ft_rate")
-
-
 def _gridded(grid: dict[str, Any]) -> set[str]:
     """The config keys a grid sweeps, its linked groups' included."""
     keys: set[str] = set()
@@ -364,11 +362,11 @@ def sensing_line(exp: dict[str, Any]) -> str:
             return "per cell"
         return f"σ {value * scale:g} {unit}" if value else none
 
-    if "domain.ft_sensor" in grid or any(f"domain.{k}" in grid for k in _FT_KEYS):
+    if "domain.ft_sensor" in grid or any(f"domain.{k}" in grid for k in FT_DOMAIN_FIELDS):
         ft = "per cell (the grid sweeps it)"
     elif d.get("ft_sensor"):
         ft = f"`{d['ft_sensor']}` (a preset)"
-    elif any(d.get(k, 0.0) for k in _FT_KEYS):
+    elif any(d.get(k, 0.0) for k in FT_DOMAIN_FIELDS):
         ft = (
             f"σ {d.get('force_noise', 0.0):g} N and {d.get('torque_noise', 0.0):g} N m, "
             f"{d.get('ft_latency', 0.0) * 1e3:g} ms late, bias drift {d.get('ft_bias_drift', 0.0):g} N/√s, "

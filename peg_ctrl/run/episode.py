@@ -45,7 +45,7 @@ from peg_ctrl.run.recorders import (
 )
 from peg_ctrl.run.result import COST_FIELDS, WALL_CLOCK_FIELDS, EpisodeResult
 from peg_ctrl.sim.assets import AssetParams
-from peg_ctrl.sim.ft_model import FTSensorModel, ft_preset
+from peg_ctrl.sim.ft_model import FT_DOMAIN_FIELDS, FTSensorModel, ft_preset
 from peg_ctrl.sim.jaw import load_default
 from peg_ctrl.sim.physics import PhysicsConfig, PhysicsProfile
 from peg_ctrl.sim.physics import profile as physics_profile
@@ -108,13 +108,13 @@ class DomainConfig:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
                 raise ConfigError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
-        for name in ("position_noise", "velocity_noise", "orientation_noise", *_FT_FIELDS):
+        for name in ("position_noise", "velocity_noise", "orientation_noise", *FT_DOMAIN_FIELDS):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"domain.{name} must be finite and >= 0, got {value!r}")
         if self.ft_sensor:
             ft_preset(self.ft_sensor, where="domain.ft_sensor")
-            for name in _FT_FIELDS:
+            for name in FT_DOMAIN_FIELDS:
                 if getattr(self, name) != 0:
                     raise ConfigError(
                         f"domain.{name}: set either domain.ft_sensor (a preset) or the sensor's "
@@ -145,10 +145,6 @@ class DomainConfig:
         """Whether the seed changes anything here: a range wider than a point, or sensor noise."""
         ranges = (self.peg_mass_scale, self.friction_scale, self.gain_scale)
         return self.noisy or any(lo < hi for lo, hi in ranges)
-
-
-# DomainConfig's fields of the F/T sensor model, in FTSensorModel's order.
-_FT_FIELDS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift", "ft_rate")
 
 
 @dataclasses.dataclass(frozen=True)

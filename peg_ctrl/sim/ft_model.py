@@ -59,7 +59,10 @@ from numpy.typing import NDArray
 
 from peg_ctrl.errors import ConfigError, UnknownComponent
 
-__all__ = ["DelayLine", "FTSensorModel", "FTSensorStream", "FT_PRESETS", "ft_preset"]
+__all__ = ["DelayLine", "FTSensorModel", "FTSensorStream", "FT_DOMAIN_FIELDS", "FT_PRESETS", "ft_preset"]
+
+#: The ``domain.`` fields of an episode's config that set an :class:`FTSensorModel`, in its order.
+FT_DOMAIN_FIELDS = ("force_noise", "torque_noise", "ft_latency", "ft_bias_drift", "ft_rate")
 
 _Wrench = NDArray[np.float64]
 

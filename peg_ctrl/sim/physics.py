@@ -257,7 +257,8 @@ class PhysicsConfig:
     def resolved(self) -> PhysicsProfile:
         """The profile as this config builds it: ``profile``, with ``friction_time`` if set."""
         prof = profile(self.profile)
-        if self.friction_time is None or prof.pair is None:
+        if self.friction_time is None:
             return prof
+        assert prof.pair is not None  # __post_init__ refuses a friction time without the pairs
         pair = dataclasses.replace(prof.pair, solreffriction=(float(self.friction_time), 1.0))
         return dataclasses.replace(prof, pair=pair)
