@@ -32,6 +32,7 @@ from peg_ctrl.cli import (
     bench,
     calibrate,
     compare,
+    crosscheck,
     model,
     plot,
     replay,
@@ -48,7 +49,20 @@ from peg_ctrl.progress import ENV_VAR
 __all__ = ["main"]
 
 # One module per command, each with register(sub) and run(args), in the order of --help.
-COMMANDS = (model, calibrate, bench, run, teleop, sweep, compare, validity, validate_profile, replay, plot)
+COMMANDS = (
+    model,
+    calibrate,
+    bench,
+    run,
+    teleop,
+    sweep,
+    compare,
+    validity,
+    crosscheck,
+    validate_profile,
+    replay,
+    plot,
+)
 
 
 def _is_user_error(exc: BaseException) -> bool:

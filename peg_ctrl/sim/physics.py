@@ -69,6 +69,7 @@ __all__ = [
     "PRECISION",
     "FAST",
     "profile",
+    "with_friction_time",
     "parts_for_play",
     "MIN_HOLE_SIDES",
 ]
@@ -228,10 +229,10 @@ class PhysicsConfig:
     the table (the explicit pairs' ``solreffriction``, critically damped), in a profile that has
     those pairs (``precision``); None keeps the profile's (the normal's ``solref``, 1 ms in
     ``precision``). A slower friction lets a contact that appears under a fast slide slide at once
-    instead of sticking and kicking the peg off (docs/physics.md, "Known limits"). It is a
-    sensitivity setting: only the sensitivity runs ``contact_real_friction5`` and
-    ``contact_real_offgrid_friction5`` use it (at 5 ms a peg with no clearance enters 2 mm,
-    beyond the validity battery's entry bar).
+    instead of sticking and kicking the peg off (docs/physics.md, "Known limits"). The studies
+    run it at 5 ms: the model whose force over 10 ms agrees with Drake's lagged contact
+    (docs/physics.md, "Cross-check against Drake"); at 5 ms an exactly aligned peg with no
+    clearance enters 2 mm, beyond the validity battery's entry bar, as it does in Drake.
     """
 
     profile: str = "seed"
@@ -256,9 +257,15 @@ class PhysicsConfig:
 
     def resolved(self) -> PhysicsProfile:
         """The profile as this config builds it: ``profile``, with ``friction_time`` if set."""
-        prof = profile(self.profile)
-        if self.friction_time is None:
-            return prof
-        assert prof.pair is not None  # __post_init__ refuses a friction time without the pairs
-        pair = dataclasses.replace(prof.pair, solreffriction=(float(self.friction_time), 1.0))
-        return dataclasses.replace(prof, pair=pair)
+        return with_friction_time(profile(self.profile), self.friction_time)
+
+
+def with_friction_time(prof: PhysicsProfile, friction_time: float | None) -> PhysicsProfile:
+    """``prof`` with its peg pairs' friction reference at ``friction_time`` [s], critically
+    damped (``physics.friction_time``); None: ``prof`` as it is."""
+    if friction_time is None:
+        return prof
+    if prof.pair is None:
+        raise ConfigError(f"physics profile {prof.name} has no explicit peg pairs to set a friction time on")
+    pair = dataclasses.replace(prof.pair, solreffriction=(float(friction_time), 1.0))
+    return dataclasses.replace(prof, pair=pair)

@@ -38,6 +38,7 @@ __all__ = [
     "check_scene",
     "build_spec",
     "build_model",
+    "add_fixture",
     "export_scene",
     "SLIDE_JOINTS",
     "BALL_JOINT",
@@ -479,10 +480,8 @@ def build_spec(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = S
     spec.visual.global_.offwidth = 1280
     spec.visual.global_.offheight = 720
     _set_physics_options(spec, cfg, physics)
-    _add_table(spec)
-    parts = _add_block(spec, cfg, assets, files)
+    add_fixture(spec, cfg, physics, files)
     _add_peg(spec, cfg, physics, files)
-    _add_peg_pairs(spec, cfg, physics, parts)
     _add_gripper(spec, cfg)
     _add_cameras_and_lights(spec, cfg)
     _add_contact_sensors(spec)
@@ -490,6 +489,20 @@ def build_spec(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = S
     model = spec.compile()
     _add_home_key(spec, model, cfg)
     return spec
+
+
+def add_fixture(
+    spec: mujoco.MjSpec, cfg: SceneConfig, physics: PhysicsProfile, files: dict[str, Path] | None = None
+) -> list[str]:
+    """The table, the block with its collision parts as ``physics`` builds them, and the peg's
+    contact pairs with them; returns the parts' geom names. The peg itself, a body ``peg`` with
+    a geom ``peg``, is the caller's (the scene's free peg, or a rig's held one). ``files``: the
+    assets ``ensure_assets`` wrote for ``physics.assets(cfg.assets)``, if already at hand."""
+    files = files if files is not None else ensure_assets(physics.assets(cfg.assets))
+    _add_table(spec)
+    parts = _add_block(spec, cfg, physics.assets(cfg.assets), files)
+    _add_peg_pairs(spec, cfg, physics, parts)
+    return parts
 
 
 def build_model(cfg: SceneConfig | None = None, physics: str | PhysicsProfile = SEED) -> mujoco.MjModel:
