@@ -18,6 +18,7 @@ from peg_ctrl.experiments.stats import (
     compare_arms,
     compared_time,
     episodes_frame,
+    force_metric,
     summary_columns,
     wilson_interval,
 )
@@ -54,15 +55,16 @@ def comparison_section(rows: list[dict[str, Any]]) -> list[str]:
     pairs = compare_arms(rows)
     if not pairs:
         return []
-    tasks = contact_tasks(episodes_frame(rows))
+    df = episodes_frame(rows)
+    tasks = contact_tasks(df)
     seated = f"; for {tasks} the time from the first contact to seated" if tasks else ""
     lines = [
         "## Which arms differ",
         "",
-        "Pairs of controller+planner at the same clearance. Success: Boschloo exact test; peak "
-        f"peg-block force and time to insert (successes only{seated}): Mann-Whitney U. All p-values are "
-        f"two-sided and Holm-corrected over the pairs at that clearance; bold: p < {ALPHA}. Intervals "
-        "in the summary: Wilson (success), percentile bootstrap of the median (force, time).",
+        "Pairs of controller+planner at the same clearance. Success: Boschloo exact test; "
+        f"{force_metric(df)[1]} and time to insert (successes only{seated}): Mann-Whitney U. All "
+        f"p-values are two-sided and Holm-corrected over the pairs at that clearance; bold: p < {ALPHA}. "
+        "Intervals in the summary: Wilson (success), percentile bootstrap of the median (force, time).",
         "",
         "| clearance [mm] | A | B | success A / B | p | force median A / B [N] | p | time median A / B [s] "
         "| p | differ in |",
@@ -88,7 +90,9 @@ def against_section(
     pairs = compare_arms(rows, against=arm)
     if not pairs:
         return []
-    tasks = contact_tasks(episodes_frame(rows))
+    df = episodes_frame(rows)
+    tasks = contact_tasks(df)
+    force = force_metric(df)[1]
     time_what = "first contact to seated" if tasks else "time to insert"
     source = (
         f"The new arm's episodes ran here; the other arms' are {study}'s committed episodes (a sample "
@@ -100,10 +104,10 @@ def against_section(
         f"## {arm} against {study}'s arms",
         "",
         f"{source}. Success: Wilson 95 % interval; p: Boschloo exact test (success), Mann-Whitney U "
-        f"(peak force; {time_what}, successes only), two-sided, Holm-corrected over the pairs with "
+        f"({force}; {time_what}, successes only), two-sided, Holm-corrected over the pairs with "
         f"{arm} at that clearance and planner; bold: p < {ALPHA}.",
         "",
-        f"| clearance [mm] | arm | success | 95 % interval | peak force median [N] | {time_what} "
+        f"| clearance [mm] | arm | success | 95 % interval | {force} median [N] | {time_what} "
         "median [s] | p success | p force | p time |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
@@ -152,13 +156,14 @@ def cell_section(rows: list[dict[str, Any]]) -> list[str]:
     cells = list(dict.fromkeys(df[keys].itertuples(index=False, name=None)))
     if len(cells) > _MAX_CELL_COLUMNS:
         return _condition_section(df, keys)
+    column, label = force_metric(df)
     by_cell = df.groupby(["arm", *keys], sort=False).agg(
-        wins=("won", "sum"), n=("won", "size"), force=("peak_contact_force_n", "median")
+        wins=("won", "sum"), n=("won", "size"), force=(column, "median")
     )
     lines = [
         "## Success per grid cell",
         "",
-        "Successes / episodes, and the median peak peg-block force [N], per arm and cell.",
+        f"Successes / episodes, and the median {label} of the peg on the block [N], per arm and cell.",
         "",
         "| arm | "
         + " | ".join(
@@ -187,12 +192,13 @@ def _condition_section(df: Any, keys: list[str]) -> list[str]:
     tasks = contact_tasks(df)
     seated = f"; for a {tasks} from first contact to seated" if tasks else ""
     levels = [(k, v) for k in keys for v in dict.fromkeys(df[k])]
+    column, label = force_metric(df)
     lines = [
         "## Success per condition",
         "",
         f"The grid has {len(set(df[keys].itertuples(index=False, name=None)))} cells; each column "
         "pools the episodes at one level of one grid key (every cell per episode: episodes.csv). "
-        "Successes / episodes, median peak peg-block force [N], median time to insert [s] "
+        f"Successes / episodes, median {label} of the peg on the block [N], median time to insert [s] "
         f"(successes{seated}).",
         "",
         "| arm | " + " | ".join(f"{k.split('.')[-1]}={v}" for k, v in levels) + " |",
@@ -204,7 +210,7 @@ def _condition_section(df: Any, keys: list[str]) -> list[str]:
             at = group[group[key] == value]
             time = at.loc[at["won"], "time"].median()
             texts.append(
-                f"{int(at['won'].sum())}/{len(at)}, {at['peak_contact_force_n'].median():.1f} N, "
+                f"{int(at['won'].sum())}/{len(at)}, {at[column].median():.1f} N, "
                 + ("–" if np.isnan(time) else f"{time:.1f} s")
             )
         lines.append(f"| {arm} | " + " | ".join(texts) + " |")

@@ -503,6 +503,7 @@ def contact_fields(
     first = history.first_contact
     return {
         "peak_contact_force_n": contact.peak_block,
+        "peak_force_10ms_n": contact.peak_block_sustained,
         "peak_any_contact_force_n": contact.peak_any,
         "insertion_depth_m": depth,
         "lateral_error_m": lateral,

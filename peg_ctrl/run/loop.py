@@ -452,6 +452,7 @@ class Loop:
         try:
             self.divergence.check(data, state.t)
             self.history.update(data.time, self._timestep, block, peg)
+            self.contact.sustain(block, self._timestep)  # first: a period that fails still counts
             self.contact.check(forces, pens)
             if self.grasp is not None and self.task.grasped:
                 self.grasp.check(data, state, peg)

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.sim.assets import AssetParams
+from peg_ctrl.sim.force_metric import SUSTAIN_WINDOW, SustainedPeak
 from peg_ctrl.sim.grasp_start import PUSH_SPEED, Q_TURN, HeldRig, close_on_held_peg, place_held_peg
 from peg_ctrl.sim.physics import PhysicsProfile, profile
 from peg_ctrl.sim.rotations import quat_mul
@@ -98,7 +99,8 @@ class PushResult:
     profile: str
     depth: float  # peg lower end below the mouth at the end
     max_depth: float
-    peak_force: float  # peg-block contact force, whole push
+    peak_force: float  # peg-block contact force of one physics step (the solver's peak), whole push
+    peak_force_10ms: float  # the largest mean peg-block force over any 10 ms (force_metric)
     steady_force: float  # mean over the last _STEADY_WINDOW
     penetration: float  # deepest true overlap over the last _STEADY_WINDOW (>= 0)
     steady_distance: float  # mean closest peg-block surface distance, last window (< 0: overlap,
@@ -237,6 +239,10 @@ class _PushMeter:
     steady_forces: list[float] = dataclasses.field(default_factory=list)
     steady_dist: list[float] = dataclasses.field(default_factory=list)
     rows: NDArray[np.float64] | None = None
+    sustained: SustainedPeak = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        self.sustained = SustainedPeak(self.dt, SUSTAIN_WINDOW)
 
     def add(
         self, step: int, depth: float, force: float, pen: float, dist: float, slip: float, niter: int
@@ -245,6 +251,7 @@ class _PushMeter:
         self.depth = depth
         self.max_depth = max(self.max_depth, depth)
         self.peak_force = max(self.peak_force, force)
+        self.sustained.extend((force,))
         self.peak_pen = max(self.peak_pen, pen)
         self.slip = max(self.slip, slip)
         self.max_iter = max(self.max_iter, niter)
@@ -264,6 +271,7 @@ class _PushMeter:
             depth=float(self.depth),
             max_depth=float(self.max_depth),
             peak_force=float(self.peak_force),
+            peak_force_10ms=self.sustained.peak,
             steady_force=float(np.mean(self.steady_forces)),
             penetration=float(self.steady_pen),
             steady_distance=float(np.mean(self.steady_dist)) if self.steady_dist else math.nan,

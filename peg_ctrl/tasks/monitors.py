@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 
 from peg_ctrl.errors import EpisodeFailure
+from peg_ctrl.sim.force_metric import SUSTAIN_WINDOW, SustainedPeak
 from peg_ctrl.sim.scene import GRIPPER_PREFIX, SceneConfig
 from peg_ctrl.sim.state import BLOCK_PEG, PAIRS, ControlState, PegObservation
 
@@ -180,10 +181,16 @@ class SeatedHold:
 
 
 class ContactMonitor:
-    """Peak contact forces [N] and penetrations [m]; ``force_spike`` [N] (or None) fails the episode."""
+    """Peak contact forces [N] and penetrations [m]; ``force_spike`` [N] (or None) fails the episode.
+
+    :attr:`peak_block` is the largest peg-block force of one physics step (the solver's peak);
+    :attr:`peak_block_sustained` the largest over any ``SUSTAIN_WINDOW`` of steps
+    (:mod:`peg_ctrl.sim.force_metric`: the force the studies report).
+    """
 
     def __init__(self, force_spike: float | None = None) -> None:
         self.force_spike = force_spike
+        self._sustained: SustainedPeak | None = None
         self.reset()
 
     def reset(self) -> None:
@@ -191,6 +198,19 @@ class ContactMonitor:
         self.peak_any = 0.0
         self.max_penetration = 0.0  # peg-block and peg-table
         self.grip_penetration = 0.0  # pads into the peg
+        if self._sustained is not None:
+            self._sustained.reset()
+
+    @property
+    def peak_block_sustained(self) -> float:
+        """The largest mean peg-block force over any ``SUSTAIN_WINDOW`` so far [N]."""
+        return self._sustained.peak if self._sustained is not None else 0.0
+
+    def sustain(self, block_forces: Sequence[float], dt: float) -> None:
+        """Add a control period's peg-block force of each physics step [N], ``dt`` [s] apart."""
+        if self._sustained is None:
+            self._sustained = SustainedPeak(dt, SUSTAIN_WINDOW)
+        self._sustained.extend(block_forces)
 
     def check(self, forces: list[float], penetrations: list[float]) -> None:
         """``forces`` per pair of :data:`~peg_ctrl.sim.state.PAIRS`; ``penetrations`` per peg partner."""

@@ -688,7 +688,7 @@ def test_a_float_field_added_to_the_result_reaches_episodes_csv_and_the_summary(
     with open(tmp_path / "episodes.csv", newline="") as fh:
         reader = csv.DictReader(fh)
         header, rows = list(reader.fieldnames or []), list(reader)
-    assert header[header.index("friction_time_s") + 1 :] == ["squeeze_n", "wobble_m", "log_path"]
+    assert header[header.index("peak_force_10ms_n") + 1 :] == ["squeeze_n", "wobble_m", "log_path"]
     assert [float(r["squeeze_n"]) for r in rows] == [1.0, 2.0, 3.0, 40.0, 50.0, 60.0]
     with open(tmp_path / "summary.csv", newline="") as fh:
         summary = {r["controller"]: r for r in csv.DictReader(fh)}

@@ -80,6 +80,18 @@ def test_a_monitor_failure_ends_the_run_and_its_step_is_still_recorded(model: mu
     assert loop.steps < 100
 
 
+def test_the_period_that_fails_on_a_force_spike_counts_in_the_sustained_force(model: mujoco.MjModel) -> None:
+    qpos = model.key("home").qpos.copy()
+    peg = model.joint("peg_free").qposadr[0]
+    qpos[peg : peg + 3] = (0.225, 0.0, 0.0605)  # lying on the block's face, 0.5 mm above it
+    loop = make(model, TrackingTask(HOME, qpos=qpos))
+    loop.contact = ContactMonitor(force_spike=1e-6)  # fails at the first peg-block contact
+    loop.reset(np.random.default_rng(0))
+    outcome = loop.run(max_steps=200)
+    assert (outcome.status, outcome.reason) == ("failure", "force_spike") and "block-peg" in outcome.detail
+    assert 0.0 < loop.contact.peak_block_sustained <= loop.contact.peak_block
+
+
 class Exploding:
     """A controller written against the protocol alone, not :class:`ControllerBase`."""
 

@@ -55,6 +55,7 @@ COMMITTED_COLUMNS = (
     "solve_real_time_factor",
     "phantom_contacts",
     "friction_time_s",
+    "peak_force_10ms_n",
 )
 
 
@@ -82,7 +83,8 @@ def test_the_metadata_gives_units_kinds_and_summaries() -> None:
         "text",
     )
     assert fields["controller"].metric.job and fields["controller"].column
-    assert [f.name for f in summarised()] == [
+    assert [f.name for f in summarised()] == [  # the headline first, then in field order
+        "peak_force_10ms_n",
         "peak_contact_force_n",
         "time_to_insert_s",
         "contact_to_seat_s",

@@ -92,6 +92,18 @@ def test_contact_monitor_keeps_peaks_and_fails_on_a_spike() -> None:
     ContactMonitor(force_spike=None).check(forces, [0.0, 0.0, 0.0])  # no limit: no failure
 
 
+def test_contact_monitor_keeps_the_force_sustained_over_10_ms_apart_from_the_solver_peak() -> None:
+    m = ContactMonitor()
+    assert m.peak_block_sustained == 0.0
+    m.sustain([0.0, 30.0], 0.5e-3)  # a one-step spike: 15 mN s
+    m.sustain([0.0] * 25, 0.5e-3)
+    assert m.peak_block_sustained == pytest.approx(30.0 * 0.5e-3 / 0.010)  # 1.5 N over 20 steps
+    m.sustain([2.0] * 25, 0.5e-3)  # a steady 2 N
+    assert m.peak_block_sustained == pytest.approx(2.0) and m.peak_block == 0.0  # check() keeps that one
+    m.reset()
+    assert m.peak_block_sustained == 0.0
+
+
 def test_divergence_monitor_catches_a_nan_and_a_warning(model: mujoco.MjModel) -> None:
     data = mujoco.MjData(model)
     m = DivergenceMonitor()
