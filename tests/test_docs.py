@@ -68,7 +68,7 @@ def test_example_runs(where: str, code: str, tmp_path: Path, monkeypatch: pytest
 ROOT = DOCS.parent
 HELD_INSERTION = DOCS / "demo" / "held_insertion.yaml"
 # The row of the featured comparison it reproduces: mpc/align, friction 0.3, 1 mm, no tilt, seed 0.
-HELD_INSERTION_KEY = "ec9f169469eeebc5"
+HELD_INSERTION_KEY = "38d1b53e10f3e7e1"
 
 
 def _contact_hard_row(key: str) -> dict[str, str]:

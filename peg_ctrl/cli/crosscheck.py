@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``crosscheck`` to the ``peg-sim`` subcommands."""
     p = sub.add_parser(
         "crosscheck",
-        help="the contact situations of the studies' forces, in MuJoCo and in Drake",
+        help="the studies' contact situations in MuJoCo and Drake",
         description="Runs each contact situation (a held peg sliding down the bore, landings, a side "
         "touch, wedging and entry pushes) in each contact model (MuJoCo's precision profile and its "
         "friction-time variants, the gripper's grasp, Drake's lagged and convex approximations) on "

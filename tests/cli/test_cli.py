@@ -29,6 +29,7 @@ SUBCOMMANDS = [
     "teleop",
     "sweep",
     "validity",
+    "crosscheck",
     "validate-profile",
     "plot",
 ]

@@ -57,7 +57,7 @@ class Model:
     name: str
     engine: str
     friction_time: float | None = None  # MuJoCo: the peg's pairs' friction reference [s]
-    options: tuple[tuple[str, float], ...] = ()  # MuJoCo: PhysicsProfile fields set otherwise
+    options: tuple[tuple[str, Any], ...] = ()  # MuJoCo: PhysicsProfile fields set otherwise
     drake: DrakeContact | None = None
     note: str = ""
 

@@ -68,75 +68,83 @@ class DrakeContact:
             )
 
 
+def _material(contact: DrakeContact, mu: float) -> Any:
+    """One geometry's contact properties: with the other side's, the pair's ``contact``."""
+    from pydrake.geometry import AddContactMaterial, ProximityProperties
+    from pydrake.multibody.plant import CoulombFriction
+
+    props = ProximityProperties()
+    # Drake combines two geometries' stiffnesses in series and their dissipations weighted by
+    # them: each side twice the stiffness makes the pair's the stated one.
+    AddContactMaterial(
+        dissipation=contact.dissipation,
+        point_stiffness=2.0 * contact.stiffness,
+        friction=CoulombFriction(mu, mu),
+        properties=props,
+    )
+    if contact.relaxation_time is not None:
+        props.AddProperty("material", "relaxation_time", contact.relaxation_time)
+    return props
+
+
+def _build(rig: Rig, s: Situation, contact: DrakeContact) -> tuple[Any, Any, Any, Any]:
+    """The diagram (a discrete ``MultibodyPlant``, point contact, no gravity), the plant, the
+    hand's body and the peg's, welded to it."""
+    from pydrake.geometry import Convex, Cylinder
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.multibody.tree import SpatialInertia, UnitInertia
+    from pydrake.systems.framework import DiagramBuilder
+
+    builder = DiagramBuilder()
+    config = MultibodyPlantConfig(
+        time_step=contact.timestep,
+        discrete_contact_approximation=contact.approximation,
+        contact_model="point",
+    )
+    plant, _ = AddMultibodyPlant(config, builder)
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
+    scene = rig.scene_for(s)
+    x_block = RigidTransform(np.asarray(scene.block_pos))
+    for i, part in enumerate(block_parts(rig.assets(s))):
+        shape = Convex(np.ascontiguousarray(part.vertices.T), f"part{i}")
+        plant.RegisterCollisionGeometry(
+            plant.world_body(), x_block, shape, f"part{i}", _material(contact, s.friction)
+        )
+    unit = UnitInertia(*(np.asarray(rig.inertia) / rig.mass))
+    hand = plant.AddRigidBody("hand", SpatialInertia(rig.mass, np.zeros(3), unit))
+    radius, length = scene.assets.peg_radius, scene.assets.peg_length
+    peg = plant.AddRigidBody(
+        "peg", SpatialInertia.SolidCylinderWithDensity(scene.peg_density, radius, length, [0.0, 0.0, 1.0])
+    )
+    plant.WeldFrames(hand.body_frame(), peg.body_frame(), RigidTransform(rig.peg_centre_in_hand))
+    plant.RegisterCollisionGeometry(
+        peg, RigidTransform(), Cylinder(radius, length), "peg", _material(contact, s.friction)
+    )
+    plant.Finalize()
+    return builder.Build(), plant, hand, peg
+
+
 class DrakeRig:
     """The rig in Drake with ``contact``, at the situation's start."""
 
     def __init__(self, rig: Rig, s: Situation, contact: DrakeContact) -> None:
         require_drake()
-        from pydrake.geometry import AddContactMaterial, Convex, Cylinder, ProximityProperties
         from pydrake.math import RigidTransform, RotationMatrix
-        from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
-        from pydrake.multibody.tree import SpatialInertia, UnitInertia
+        from pydrake.multibody.math import SpatialForce, SpatialVelocity
+        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
         from pydrake.systems.analysis import Simulator
-        from pydrake.systems.framework import DiagramBuilder
 
-        builder = DiagramBuilder()
-        config = MultibodyPlantConfig(
-            time_step=contact.timestep,
-            discrete_contact_approximation=contact.approximation,
-            contact_model="point",
-        )
-        plant, _ = AddMultibodyPlant(config, builder)
-        plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
-        mu = s.friction
-
-        def material() -> Any:
-            props = ProximityProperties()
-            # Drake combines two geometries' stiffnesses in series and their dissipations
-            # weighted by them: each side twice the stiffness makes the pair's the stated one.
-            AddContactMaterial(
-                dissipation=contact.dissipation,
-                point_stiffness=2.0 * contact.stiffness,
-                friction=CoulombFriction(mu, mu),
-                properties=props,
-            )
-            if contact.relaxation_time is not None:
-                props.AddProperty("material", "relaxation_time", contact.relaxation_time)
-            return props
-
-        scene = rig.scene_for(s)
-        assets = rig.assets(s)
-        x_block = RigidTransform(np.asarray(scene.block_pos))
-        for i, part in enumerate(block_parts(assets)):
-            shape = Convex(np.ascontiguousarray(part.vertices.T), f"part{i}")
-            plant.RegisterCollisionGeometry(plant.world_body(), x_block, shape, f"part{i}", material())
-        m = rig.mass
-        hand = plant.AddRigidBody(
-            "hand", SpatialInertia(m, np.zeros(3), UnitInertia(*(np.asarray(rig.inertia) / m)))
-        )
-        radius, length = scene.assets.peg_radius, scene.assets.peg_length
-        peg_inertia = SpatialInertia.SolidCylinderWithDensity(
-            scene.peg_density, radius, length, [0.0, 0.0, 1.0]
-        )
-        peg = plant.AddRigidBody("peg", peg_inertia)
-        plant.WeldFrames(hand.body_frame(), peg.body_frame(), RigidTransform(rig.peg_centre_in_hand))
-        plant.RegisterCollisionGeometry(peg, RigidTransform(), Cylinder(radius, length), "peg", material())
-        plant.Finalize()
-        self._diagram = builder.Build()
+        self._diagram, plant, hand, peg = _build(rig, s, contact)
         self._simulator = Simulator(self._diagram)
-        self._context = self._simulator.get_mutable_context()
         self._plant = plant
-        self._pctx = plant.GetMyMutableContextFromRoot(self._context)
+        self._pctx = plant.GetMyMutableContextFromRoot(self._simulator.get_mutable_context())
         self._hand, self._peg = hand, peg
         self.dt = contact.timestep
         p0, r0 = rig.start_pose(s)
         plant.SetFreeBodyPose(self._pctx, hand, RigidTransform(RotationMatrix(r0), p0))
-        from pydrake.multibody.math import SpatialForce, SpatialVelocity
-
-        self._spatial_force = SpatialForce
         plant.SetFreeBodySpatialVelocity(self._pctx, hand, SpatialVelocity(np.zeros(3), s.reference(0.0)[1]))
-        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-
+        self._spatial_force = SpatialForce
         self._applied = ExternallyAppliedSpatialForce()
         self._applied.body_index = hand.index()
         self._applied.p_BoBq_B = np.zeros(3)

@@ -209,7 +209,13 @@ def _agreement_section(data: dict[str, Any], by: dict[str, dict[str, dict[str, A
             + " | ".join(f"{v} | {ok}" for v, ok in cells)
             + f" | {row['mujoco']['peak_net_n']:.1f} / {row[ref]['peak_net_n']:.2f} | {depths} |"
         )
-    lines += ["", "Every model against the reference, over the situations both ran:", ""]
+    return lines + _models_section(data, by)
+
+
+def _models_section(data: dict[str, Any], by: dict[str, dict[str, dict[str, Any]]]) -> list[str]:
+    """Every model's agreements with the reference: the force, and the final depth."""
+    ref, metric_ = data["reference"], data["metric"]
+    lines = ["", "Every model against the reference, over the situations both ran:", ""]
     lines += [
         f"| model | {SUSTAIN_WINDOW * 1e3:g} ms force agrees | where not | final depth off by more than "
         "0.2 mm + 10 % |",
