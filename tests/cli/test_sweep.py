@@ -172,12 +172,6 @@ def test_dry_run_refuses_what_the_sweep_would_refuse(
     [
         # 5 controllers x 20,001 seeds
         (["sweep", "quick", "--set", "seeds=20001"], "sweep quick: 100,005 episodes, estimated "),
-        # 20,000 episodes are allowed, but not more than 24 h of them (on one worker: 50 times
-        # the committed run's 26 min on two)
-        (
-            ["sweep", "contact_hard", "--set", "seeds=250", "--workers", "1"],
-            "sweep contact_hard: 20,000 episodes, estimated ",
-        ),
     ],
 )
 def test_a_huge_sweep_needs_yes(argv: list[str], message: str, tmp_path: Path) -> None:
@@ -189,6 +183,19 @@ def test_a_huge_sweep_needs_yes(argv: list[str], message: str, tmp_path: Path) -
         "more than 20,000 episodes or 24 h; pass --yes to run it anyway (or --dry-run to see the breakdown)"
         in proc.stderr
     )
+    assert list(tmp_path.iterdir()) == [], "refused before anything is written"
+
+
+def test_a_sweep_of_allowed_size_estimated_too_long_needs_yes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Up to 20,000 episodes are allowed, but not more than MAX_WALL_S of them: here 1 h, which
+    1,200 contact_hard episodes on one worker exceed (3 times the committed run's 400 on two)."""
+    monkeypatch.setattr(sweep, "MAX_WALL_S", 3600.0)
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", "contact_hard", "--set", "seeds=15", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "sweep contact_hard: 1,200 episodes, estimated " in err and "more than 20,000 episodes or 1 h" in err
     assert list(tmp_path.iterdir()) == [], "refused before anything is written"
 
 

@@ -16,7 +16,7 @@ import math
 import time
 from importlib import resources
 from pathlib import Path
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,8 +56,7 @@ class Rig:
 
     def assets(self, s: Situation) -> AssetParams:
         """The geometry the profile builds for the situation's clearance and chamfer."""
-        params = dataclasses.replace(self.scene.assets, clearance=s.clearance, chamfer=s.chamfer)
-        return self.profile.assets(params)
+        return self.profile.assets(self.scene_for(s).assets)
 
     def scene_for(self, s: Situation) -> SceneConfig:
         """The project's scene with the situation's geometry and friction."""
@@ -156,21 +155,28 @@ class Engine(Protocol):
 
 @dataclasses.dataclass
 class Trace:
-    """A situation run in one engine, every physics step: time [s], the sum of the peg-block
-    normal forces [N], the magnitude of the net peg-block force [N] (the studies' measure), the
-    hand's force magnitude [N] (what a wrist sensor between it and the arm reads), the lower end's
-    depth below the face and its lateral offset from the axis along x and y [m], the deepest
-    overlap [m] and the number of contact points."""
+    """A situation run in one engine, one row per physics step (:attr:`NAMES`): the time [s]
+    at the step's end, the sum of the peg-block normal forces [N], the magnitude of the net
+    peg-block force [N] (the studies' measure), the magnitude of the hand's force [N] (what a
+    wrist sensor between it and the arm reads), the lower end's depth below the face and its
+    offset from the hole's axis along x and y [m], and the deepest overlap [m]."""
 
-    dt: float
-    columns: NDArray[np.float64]  # (steps, 8)
+    dt: float  # [s]
+    columns: NDArray[np.float64]  # (steps, len(NAMES))
     wall_time_s: float
-    NAMES = ("t", "normal", "net", "wrist", "depth", "x", "y", "overlap")
+    NAMES: ClassVar[tuple[str, ...]] = ("t", "normal", "net", "wrist", "depth", "x", "y", "overlap")
 
-    def __getattr__(self, name: str) -> NDArray[np.float64]:
-        if name in Trace.NAMES:
-            return self.columns[:, Trace.NAMES.index(name)]
-        raise AttributeError(name)
+    def column(self, name: str) -> NDArray[np.float64]:
+        """The column ``name`` of :attr:`NAMES` (steps,)."""
+        return self.columns[:, self.NAMES.index(name)]
+
+    t = property(lambda self: self.column("t"))
+    normal = property(lambda self: self.column("normal"))
+    net = property(lambda self: self.column("net"))
+    wrist = property(lambda self: self.column("wrist"))
+    depth = property(lambda self: self.column("depth"))
+    x = property(lambda self: self.column("x"))
+    overlap = property(lambda self: self.column("overlap"))
 
 
 def run_situation(engine: Engine, rig: Rig, s: Situation) -> Trace:

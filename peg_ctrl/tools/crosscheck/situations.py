@@ -121,7 +121,7 @@ class Situation:
     The peg's lower end starts at ``start`` (relative to the mouth's centre, z up from the face),
     tilted by ``tilt`` about world y through that end (its top towards +x), moving with the
     reference. The reference moves the hand at ``velocity`` for ``travel`` metres, then holds
-    for ``hold`` seconds. ``hand`` is ``"impedance"`` (the touch's, every axis),
+    for ``hold`` seconds. ``hand`` is ``"impedance"`` (the touch's, every axis)
     or ``"push"`` (the battery's, ``push_force`` at up to the speed of ``velocity``). ``press_x``
     sets the impedance's reference that many newtons of its stiffness past the start along +x,
     so that the peg presses on a wall it touches.
