@@ -31,6 +31,7 @@ __all__ = [
     "STEEL",
     "REFERENCE",
     "CHOSEN",
+    "CHOSEN_GRASP",
     "model",
     "measure",
     "run_one",
@@ -47,6 +48,7 @@ STEEL = DrakeContact(stiffness=1.0e7, dissipation=0.3)
 WINDOWS = (0.005, SUSTAIN_WINDOW)  # the sustained force's windows [s]
 REFERENCE = "drake_lagged"  # the contact model without the convex models' gliding
 CHOSEN = "mujoco_friction5ms"  # the model the studies run
+CHOSEN_GRASP = "mujoco_grasp_friction5ms"  # ... in the project's scene, the gripper's grasp
 
 
 @dataclasses.dataclass(frozen=True)

@@ -23,7 +23,7 @@ import numpy as np
 from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.run.plots import pyplot, save_figure
 from peg_ctrl.sim.force_metric import SUSTAIN_WINDOW
-from peg_ctrl.tools.crosscheck.battery import CHOSEN, MODELS, REFERENCE, Model, run_battery
+from peg_ctrl.tools.crosscheck.battery import CHOSEN, CHOSEN_GRASP, MODELS, REFERENCE, Model, run_battery
 from peg_ctrl.tools.crosscheck.rig import Trace, study_rig
 from peg_ctrl.tools.crosscheck.situations import SITUATIONS, Situation
 
@@ -174,7 +174,7 @@ def _agreement_section(data: dict[str, Any], by: dict[str, dict[str, dict[str, A
     """The chosen model and metric against the reference, situation by situation; then every
     model's count of agreements."""
     ref, chosen, metric_ = data["reference"], data["chosen"], data["metric"]
-    grasp = "mujoco_grasp_friction5ms"
+    grasp = CHOSEN_GRASP
     names = {m["name"] for m in data["models"]}
     if not {ref, chosen, "mujoco"} <= names:
         return []
@@ -258,7 +258,7 @@ def _plot_sustained(path: Path, rows: Sequence[dict[str, Any]], models: list[str
     style = {
         "mujoco": ("C3", "v"),
         CHOSEN: ("C2", "o"),
-        "mujoco_grasp": ("C1", "^"),
+        CHOSEN_GRASP: ("C1", "^"),
         "drake_similar": ("C4", "s"),
     }
     for m in models:
