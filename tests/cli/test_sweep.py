@@ -195,7 +195,8 @@ def test_a_sweep_of_allowed_size_estimated_too_long_needs_yes(
     monkeypatch.chdir(tmp_path)
     assert main(["sweep", "contact_hard", "--set", "seeds=15", "--workers", "1"]) == 2
     err = capsys.readouterr().err
-    assert "sweep contact_hard: 1,200 episodes, estimated " in err and "more than 20,000 episodes or 1 h" in err
+    assert "sweep contact_hard: 1,200 episodes, estimated " in err
+    assert "more than 20,000 episodes or 1 h" in err
     assert list(tmp_path.iterdir()) == [], "refused before anything is written"
 
 
