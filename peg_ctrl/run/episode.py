@@ -435,6 +435,7 @@ def _write_records(
     rec.steps_log.flush(loop)
     if rec.trace is not None:
         rec.trace.flush()
+    logger.sync()  # the log and the trace on disk before summary.json (the writer has its own thread)
     result = _result(cfg, loop, outcome, wall, logger)
     summary = rec.out_dir / "summary.json"
     result.trace_path = str(logger.trace_path)

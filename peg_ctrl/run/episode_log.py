@@ -116,6 +116,22 @@ class EpisodeLogger:
         self._trace_chunks.append(rows)
         self._queue.put(("trace", rows))
 
+    def sync(self) -> None:
+        """Wait until everything queued so far is on disk (the writer works on its own thread:
+        a file written after this sees every record and row before it).
+
+        Raises:
+            OutputError: a write failed.
+        """
+        if self._closed:
+            return
+        written = threading.Event()
+        self._queue.put(("sync", written))
+        while not written.wait(0.05):
+            if not self._thread.is_alive():  # the writer stopped on an error: raised below
+                break
+        self._check()
+
     def close(self, end_record: dict[str, Any] | None = None) -> None:
         """Flush everything, write the end record and ``forces.npz`` (atomically), stop the
         writer and remove ``forces.partial``.
@@ -163,6 +179,7 @@ class EpisodeLogger:
             while not stop:
                 lines: list[str] = []
                 rows: list[bytes] = []
+                synced: list[threading.Event] = []
                 item = self._queue.get()
                 while True:  # take everything queued: one write per file per batch
                     if item is _STOP:
@@ -171,6 +188,8 @@ class EpisodeLogger:
                     kind, payload = item
                     if kind == "json":
                         lines.append(to_json(payload, separators=(",", ":")) + "\n")
+                    elif kind == "sync":
+                        synced.append(payload)
                     else:
                         rows.append(np.ascontiguousarray(payload, dtype="<f8").tobytes())
                     try:
@@ -179,6 +198,8 @@ class EpisodeLogger:
                         break
                 self._log.append("".join(lines).encode("utf-8"))
                 self._trace.append(b"".join(rows))
+                for event in synced:
+                    event.set()
         except BaseException as exc:  # raised on the producer's thread by _check()
             self._error = exc
         finally:

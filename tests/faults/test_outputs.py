@@ -154,6 +154,29 @@ def test_a_log_write_error_reaches_the_loop_as_an_output_error(tmp_path: Path) -
     assert stat.S_ISCHR(full.stat().st_mode)
 
 
+def test_sync_returns_once_the_queued_records_are_on_disk_and_raises_a_write_error(tmp_path: Path) -> None:
+    """The episode writes ``summary.json`` after :meth:`EpisodeLogger.sync`: with the writer on
+    its own thread, a file written after the last trace rows were queued could otherwise take
+    the last of a disk before them."""
+    logger = EpisodeLogger(tmp_path)
+    for i in range(50):
+        logger.record({"event": "step", "i": i})
+        logger.trace(np.full((100, 11), float(i)))
+    logger.sync()
+    assert len((tmp_path / "log.jsonl").read_bytes().splitlines()) == 50
+    assert (tmp_path / "forces.partial").stat().st_size == 50 * 100 * 11 * 8
+    logger.close()
+
+    out = tmp_path / "full"
+    out.mkdir()
+    (out / "forces.partial").symlink_to(_device(tmp_path / "dev_full", 7))
+    logger = EpisodeLogger(out)
+    logger.trace(np.zeros((5, 11)))
+    with pytest.raises(OutputError, match=r"cannot write '.*forces\.partial': No space left on device"):
+        logger.sync()
+    logger.abort()
+
+
 def test_a_device_is_written_in_place_never_replaced(tmp_path: Path) -> None:
     """``--out /dev/stdout``: a rename over a device would put a regular file in its place."""
     null, full = _device(tmp_path / "null", 3), _device(tmp_path / "full", 7)
