@@ -8,6 +8,10 @@ OUT    ?= runs/demo
 # torch for the RL example (stable-baselines3): a CPU build, installed before the package so that
 # pip does not resolve SB3's bare `torch` to a CUDA build of several GB. Override: make TORCH=...
 TORCH  ?= torch==2.13.0
+# The exact versions installed (pip constraints; docs/reproducibility.md). `make lock` remakes it
+# from pyproject.toml's ranges; `make install LOCK=` installs from the ranges alone.
+LOCK   ?= requirements/lock.txt
+CONSTRAINTS := $(if $(LOCK),-c $(LOCK))
 # Test processes (pytest-xdist): one per core, at most 4. Override: make test WORKERS=1
 WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); echo $$(( n < 4 ? n : 4 )))
 # Each test module runs in one process: its module fixtures (episodes, sweeps) are made once.
@@ -19,13 +23,13 @@ GIT_STATUS := { git status --porcelain --untracked-files=all 2>/dev/null || true
 # Top-level paths the wheel is built from (pyproject.toml [tool.setuptools]).
 PKG_SOURCES := pyproject.toml README.md peg_ctrl controllers planners experiments
 
-.PHONY: install demo readme-figure sysdeps sysdeps-test apt test test-slow lint bench model calibrate clean
+.PHONY: lock install demo readme-figure sysdeps sysdeps-test apt test test-slow lint bench model calibrate clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet '$(TORCH)'
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet '$(TORCH)' $(CONSTRAINTS)
+	$(BIN)/python -m pip install --quiet -e '.[dev]' $(CONSTRAINTS)
 	touch $@
 
 install: $(STAMP)
@@ -97,6 +101,20 @@ model: $(STAMP)
 
 calibrate: $(STAMP)
 	$(BIN)/peg-sim calibrate --replace-packaged
+
+## lock: remake requirements/lock.txt: a fresh environment from pyproject.toml's ranges (no lock),
+## frozen. Commit it with the studies rerun on it (docs/reproducibility.md).
+lock:
+	rm -rf $(VENV)-lock && $(PYTHON) -m venv $(VENV)-lock
+	$(VENV)-lock/bin/python -m pip install --quiet --upgrade pip
+	$(VENV)-lock/bin/python -m pip install --quiet '$(TORCH)'
+	$(VENV)-lock/bin/python -m pip install --quiet -e '.[dev]'
+	@mkdir -p $(dir $(LOCK))
+	@{ sed -n '/^#/p' $(LOCK) 2>/dev/null; \
+	  $(VENV)-lock/bin/python -m pip freeze --exclude-editable | sed -E 's/^(torch==[0-9.]+)\+cpu$$/\1/'; \
+	  } > $(LOCK).tmp && mv $(LOCK).tmp $(LOCK)
+	rm -rf $(VENV)-lock
+	@echo "wrote $(LOCK): $$(grep -vc '^#' $(LOCK)) packages"
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

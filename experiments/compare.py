@@ -24,15 +24,24 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from collections.abc import Callable
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import apply_overrides, to_dict
+from peg_ctrl.environment import ENVIRONMENT_FILE, differences, environment, environment_id
 from peg_ctrl.errors import ConfigError
+from peg_ctrl.experiments.baseline import (
+    Verdict,
+    classify,
+    classify_arm,
+    committed_studies,
+    find_study,
+    match_committed,
+    sample_jobs,
+    tolerance,
+)
 from peg_ctrl.experiments.config import (
     ExperimentConfig,
     Job,
@@ -40,12 +49,10 @@ from peg_ctrl.experiments.config import (
     expand,
     experiment_from_mapping,
 )
-from peg_ctrl.experiments.report import read_rows
 from peg_ctrl.experiments.report.run_time import add_run_time
 from peg_ctrl.experiments.runner import collect_rows, episode_columns, run_jobs, unfinished, write_tables
 from peg_ctrl.io import atomic_write_text, lock_output_dir, remove_stale_temps, to_json
 from peg_ctrl.run.plugins import is_plugin, load_plugin
-from peg_ctrl.run.result import WALL_CLOCK_FIELDS
 
 __all__ = [
     "BaselineMismatch",
@@ -57,59 +64,13 @@ __all__ = [
     "NEW_ARM_MARK",
 ]
 
-#: What a committed run holds.
-STUDY_FILES = ("experiment.json", "episodes.csv")
 #: Appended to the new controller's label when a study's controller has its name.
 NEW_ARM_MARK = "*"
-# Columns a rerun is not compared in: measured in wall time, or naming the episode (its key, its
-# log) rather than saying what happened in it.
-_NOT_COMPARED = frozenset({*WALL_CLOCK_FIELDS, "key", "log_path"})
-# Two recorded numbers are the same within this (their CSV text round-trips a float exactly; the
-# margin absorbs a last-bit difference of another machine's maths library, nothing more).
-_REL_TOL, _ABS_TOL = 1e-9, 1e-12
 
 
 class BaselineMismatch(ConfigError):
     """A study arm's committed episode does not reproduce on this code (exit 2: rerun it with
     ``--rerun-baselines``, or recommit the study)."""
-
-
-def committed_studies() -> dict[str, Path]:
-    """The committed runs by name: the ``docs/<study>/`` directories holding
-    :data:`STUDY_FILES`, in the project beside the package and in the working directory."""
-    roots = [Path(str(resources.files("peg_ctrl.experiments"))).parent / "docs", Path.cwd() / "docs"]
-    found: dict[str, Path] = {}
-    for root in roots:
-        if root.is_dir():
-            for entry in sorted(root.iterdir()):
-                if all((entry / f).is_file() for f in STUDY_FILES):
-                    found.setdefault(entry.name, entry)
-    return found
-
-
-def find_study(study: str) -> Path:
-    """A committed run's directory: ``study`` as a path, or the name of one of
-    :func:`committed_studies`.
-
-    Raises:
-        ConfigError: neither; the message lists the committed studies.
-    """
-    path = Path(study)
-    if path.is_dir():
-        missing = [f for f in STUDY_FILES if not (path / f).is_file()]
-        if missing:
-            raise ConfigError(
-                f"study {study!r}: {path} holds no committed run (no {', '.join(missing)}); a study is a "
-                "sweep's output directory or one of the committed studies"
-            )
-        return path
-    known = committed_studies()
-    if study in known:
-        return known[study]
-    raise ConfigError(
-        f"study {study!r}: no such directory or committed study; committed: {', '.join(known) or '(none)'} "
-        "(the committed studies are docs/<study>/ in the repository: run from its root, or give the path)"
-    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -228,11 +189,8 @@ def plan_comparison(
 
     study_jobs, new_jobs = _jobs(name, study_exp, new_exp)
     arm = new_jobs[0].arm
-    committed = _match_committed(study_dir, study_jobs)
-    sample = {
-        a: tuple(sorted((j for j in jobs if j.key in committed), key=lambda j: j.key)[:verify])
-        for a, jobs in study_jobs.items()
-    }
+    committed = match_committed(study_dir, study_jobs)
+    sample = sample_jobs(study_jobs, committed, verify)
     return Comparison(
         study=name,
         study_dir=study_dir,
@@ -271,38 +229,6 @@ def _jobs(
             f"the new arm {new_jobs[0].arm} runs the same episodes as {name}'s arm {same}: nothing to compare"
         )
     return {a: tuple(jobs) for a, jobs in study_jobs.items()}, new_jobs
-
-
-def _match_committed(study_dir: Path, study_jobs: dict[str, tuple[Job, ...]]) -> dict[str, dict[str, str]]:
-    """Each study job's committed row, by the job's key: the row of the committed job with the
-    same arm and the same config (a ``--set`` of the seeds or a grid key keeps it; one of the
-    physics or a task field does not). Matched by what the episode is rather than by its key,
-    since a key leaves out the fields at their defaults: a default changed since the study ran
-    changes the key, not the episode (the committed ``experiment.json`` holds every field's
-    value). A committed job finds its row by what ``episodes.csv`` wrote of it: arm, planner,
-    clearance, seed and its grid values, as text."""
-    committed = expand(experiment_from_mapping(json.loads((study_dir / "experiment.json").read_text())))
-    rows = {}
-    for row in read_rows(study_dir):
-        cell = tuple((k, row.get(k, "")) for k in sorted(committed[0].cell)) if committed else ()
-        rows[(row["arm"], row["planner"], row["clearance_m"], row["seed"], cell)] = row
-    by_config = {}
-    for job in committed:
-        cell = tuple((k, _text(v)) for k, v in sorted(job.cell.items()))
-        written = rows.get((job.arm, job.planner, _text(job.clearance), _text(job.seed), cell))
-        if written is not None:
-            by_config[(job.arm, _json(job.config))] = written
-    found = {}
-    for jobs in study_jobs.values():
-        for job in jobs:
-            match = by_config.get((job.arm, _json(job.config)))
-            if match is not None:
-                found[job.key] = match
-    return found
-
-
-def _json(config: Any) -> str:
-    return json.dumps(to_dict(config), sort_keys=True)
 
 
 def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, Any], ExperimentConfig]:
@@ -434,24 +360,63 @@ def _run_locked(
 
 
 def _verify(comp: Comparison, out_dir: Path, rerun: set[str], rerun_baselines: bool) -> dict[str, Any]:
-    """Compare each study arm's rerun sample with its committed rows; an arm that differs is
-    added to ``rerun`` (``rerun_baselines``) or stops the comparison. Returns, per arm checked,
-    its sample's keys and whether they reproduced."""
+    """Class each study arm's rerun sample against its committed rows
+    (:mod:`~peg_ctrl.experiments.baseline`); an arm that differs is added to ``rerun``
+    (``rerun_baselines``) or stops the comparison. Returns, per arm checked, its sample's keys,
+    its class and what decided it."""
     verified = {}
     for arm, jobs in comp.sample.items():
         if arm in rerun:
             continue
-        diffs = [(j, d) for j in jobs if (d := _differences(comp.committed[j.key], _fresh(j, out_dir)))]
-        verified[arm] = {"episodes": [j.key for j in jobs], "reproduced": not diffs}
-        if diffs and not rerun_baselines:
-            raise BaselineMismatch(_mismatch_line(comp, arm, *diffs[0]))
-        if diffs:
+        tol = tolerance(comp.study, arm)
+        verdicts = [classify(comp.committed[j.key], collect_rows([j], out_dir)[0], tol) for j in jobs]
+        worst = classify_arm(verdicts)
+        verified[arm] = {
+            "episodes": [j.key for j in jobs],
+            "class": worst.cls,
+            "detail": worst.detail(),
+            "tolerance": tol.source,
+            "reproduced": worst.cls == "reproduced",
+        }
+        if worst.cls == "differs" and not rerun_baselines:
+            job = jobs[verdicts.index(worst)]
+            raise BaselineMismatch(_mismatch_line(comp, arm, job, worst))
+        if worst.cls == "differs":
             rerun.add(arm)
     return verified
 
 
+def _mismatch_line(comp: Comparison, arm: str, job: Job, verdict: Verdict) -> str:
+    where = ", ".join(f"{k}={v}" for k, v in job.cell.items())
+    return (
+        f"{comp.study}'s committed {arm} differs: episode {job.key} (seed {job.seed}"
+        f"{', ' + where if where else ''}) {verdict.detail()}; pass --rerun-baselines to rerun that arm, "
+        "or recommit the study"
+    )
+
+
+def study_environment_differences(study_dir: Path) -> list[str]:
+    """What differs between the environment that made the study (its ``environment.json``) and
+    this one; ``["unknown: ..."]`` when the study does not record it."""
+    path = study_dir / ENVIRONMENT_FILE
+    if not path.is_file():
+        return [f"unknown: {study_dir.name} records no environment (no {ENVIRONMENT_FILE})"]
+    recorded = json.loads(path.read_text())
+    mine = environment()
+    found = [differences(record, mine) for record in recorded.values()]
+    return min(found, key=len) if found else []
+
+
 def _write_record(out_dir: Path, comp: Comparison, verified: dict[str, Any], rerun: set[str]) -> None:
-    record = {**comp.record(), "verified": verified, "rerun": sorted(rerun)}
+    record = {
+        **comp.record(),
+        "environment": {
+            "here": environment_id(),
+            "differences": study_environment_differences(comp.study_dir),
+        },
+        "verified": verified,
+        "rerun": sorted(rerun),
+    }
     atomic_write_text(out_dir / "compare.json", to_json(record, indent=2) + "\n")
 
 
@@ -467,47 +432,6 @@ def _check_same_comparison(out_dir: Path, comp: Comparison) -> None:
             )
     elif (out_dir / "experiment.json").is_file():
         raise ConfigError(f"{out_dir} holds a sweep, not a comparison; choose another --out")
-
-
-def _fresh(job: Job, out_dir: Path) -> dict[str, Any]:
-    return collect_rows([job], out_dir)[0]
-
-
-def _text(value: Any) -> str:
-    """A value as ``episodes.csv`` writes it."""
-    return "" if value is None else str(value)
-
-
-def _differences(committed: dict[str, str], fresh: dict[str, Any]) -> list[tuple[str, str, str]]:
-    """The columns (recorded in both) in which a rerun differs from its committed row:
-    (column, committed, now)."""
-    found = []
-    for column, was in committed.items():
-        if column in _NOT_COMPARED or column not in fresh:
-            continue
-        now = _text(fresh[column])
-        if now != was and not _same_number(was, now):
-            found.append((column, was, now))
-    return found
-
-
-def _same_number(a: str, b: str) -> bool:
-    try:
-        x, y = float(a), float(b)
-    except ValueError:
-        return False
-    return math.isclose(x, y, rel_tol=_REL_TOL, abs_tol=_ABS_TOL) or (math.isnan(x) and math.isnan(y))
-
-
-def _mismatch_line(comp: Comparison, arm: str, job: Job, diffs: list[tuple[str, str, str]]) -> str:
-    column, was, now = diffs[0]
-    where = ", ".join(f"{k}={v}" for k, v in job.cell.items())
-    more = f" (and {len(diffs) - 1} more columns)" if len(diffs) > 1 else ""
-    return (
-        f"{comp.study}'s committed {arm} does not reproduce: episode {job.key} (seed {job.seed}"
-        f"{', ' + where if where else ''}) {column} was {was or '(blank)'}, is {now or '(blank)'} "
-        f"now{more}; pass --rerun-baselines to rerun that arm, or recommit the study"
-    )
 
 
 def _rows(comp: Comparison, out_dir: Path, rerun: set[str]) -> list[dict[str, Any]]:

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from peg_ctrl.config import to_dict
+from peg_ctrl.environment import ENVIRONMENT_FILE, environment
 from peg_ctrl.errors import ConfigError, UnknownComponent
 from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, job_config, job_config_mapping
 from peg_ctrl.io import atomic_path, atomic_write_text, lock_output_dir, remove_stale_temps, to_json
@@ -39,6 +40,7 @@ from peg_ctrl.run.workers import worker_pool
 __all__ = [
     "run_sweep",
     "run_jobs",
+    "record_environments",
     "unfinished",
     "collect_rows",
     "refresh_tables",
@@ -93,6 +95,7 @@ def _run_one(args: _Task) -> dict[str, Any]:
     load_plugins(plugins)  # once per worker and file: a spawned worker has only the package's
     result = run_episode(job_config(data), Path(out), plot=False).to_dict()
     result["key"] = key
+    result["environment_record"] = environment()  # the worker's: it ran the episode
     return result
 
 
@@ -324,6 +327,7 @@ def run_jobs(
         else:
             wins += summary["status"] == "success"
     started = time.perf_counter()
+    seen: dict[str, dict[str, Any]] = {}  # the environments that ran episodes now, by id
     try:
         with progress_bar(
             total=len(jobs),
@@ -340,15 +344,28 @@ def run_jobs(
             # whenever the suspended generator is collected.
             with contextlib.closing(stream):
                 for result in stream:
+                    seen.setdefault(result["environment"], result.pop("environment_record"))
                     wins += result["status"] == "success"
                     bar.set_postfix_str(f"{wins} inserted", refresh=False)
                     bar.update(1)
     finally:
+        record_environments(out_dir, seen)
         if tasks and record_time:  # a resumed sweep's run time is the sum over its invocations
             from peg_ctrl.experiments.report.run_time import add_run_time
 
             add_run_time(out_dir, time.perf_counter() - started)
     return len(tasks)
+
+
+def record_environments(out_dir: Path, seen: dict[str, dict[str, Any]]) -> None:
+    """Add the environments in ``seen`` (id -> record, :mod:`peg_ctrl.environment`) to
+    ``out_dir/environment.json``, which keeps every environment that ran one of its episodes
+    (each episode's summary names its own by id)."""
+    path = out_dir / ENVIRONMENT_FILE
+    known = json.loads(path.read_text()) if path.is_file() else {}
+    if set(seen) <= set(known):
+        return
+    atomic_write_text(path, to_json({**known, **seen}, indent=2) + "\n")
 
 
 def collect_rows(jobs: list[Job], out_dir: Path) -> list[dict[str, Any]]:

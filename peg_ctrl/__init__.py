@@ -16,6 +16,32 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
 
+def _pin_blas_kernels() -> None:
+    """The committed studies' BLAS kernels on every CPU that can run them: numpy's OpenBLAS picks
+    its kernels by the CPU (or by ``OPENBLAS_CORETYPE``), and its Haswell kernels sum in another
+    order than its SkylakeX (AVX-512) ones, which moves 7 of contact_hard's 10 arms
+    (docs/reproducibility.md). On an x86-64 CPU with AVX-512 (F, CD, BW, DQ, VL), ``SkylakeX``,
+    the kernels the studies were made with, overriding an inherited ``OPENBLAS_CORETYPE`` (recorded
+    in every run's environment); ``PEG_CTRL_BLAS=keep`` keeps yours. Read when OpenBLAS loads:
+    import peg_ctrl before numpy."""
+    if _os.environ.get("PEG_CTRL_BLAS", "").lower() == "keep":
+        _os.environ.pop("PEG_CTRL_BLAS_OVERRODE", None)
+        return
+    try:
+        with open("/proc/cpuinfo") as f:
+            flags = next((line.split(":", 1)[1].split() for line in f if line.startswith("flags")), [])
+    except OSError:
+        return
+    if {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"} <= set(flags):
+        before = _os.environ.get("OPENBLAS_CORETYPE")
+        if before is not None and before != "SkylakeX":
+            _os.environ["PEG_CTRL_BLAS_OVERRODE"] = before
+        _os.environ["OPENBLAS_CORETYPE"] = "SkylakeX"
+
+
+_pin_blas_kernels()
+
+
 def _choose_gl_backend() -> None:
     """Headless by default: on Linux without a display, and with ``MUJOCO_GL`` unset, offscreen
     rendering (``render_mode="rgb_array"``, ``run --video``) uses EGL, else OSMesa, whichever

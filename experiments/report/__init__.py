@@ -5,7 +5,8 @@ episodes' force traces (``episodes/<key>/forces.npz``): the aligned force profil
 against depth, which are left out (and the report says so) when the traces are not there.
 
 Modules: :mod:`~peg_ctrl.experiments.report.episodes_csv` (reading and checking
-``episodes.csv``), :mod:`~peg_ctrl.experiments.report.sections` (the report's sections),
+``episodes.csv``), :mod:`~peg_ctrl.experiments.report.header` (what ran, sensed, on which environment),
+:mod:`~peg_ctrl.experiments.report.sections` (the report's other sections),
 :mod:`~peg_ctrl.experiments.report.plots` and :mod:`~peg_ctrl.experiments.report.traces` (the
 plots), :mod:`~peg_ctrl.experiments.report.axes` (arms, swept conditions, task names),
 :mod:`~peg_ctrl.experiments.report.run_time` (the sweep's run time over its invocations). The
@@ -19,6 +20,7 @@ from pathlib import Path
 
 from peg_ctrl.experiments.report.axes import arm_of, swept_conditions
 from peg_ctrl.experiments.report.episodes_csv import episodes_csv_problem, read_rows
+from peg_ctrl.experiments.report.header import environment_lines, header_section, verification_lines
 from peg_ctrl.experiments.report.plots import draw_plots
 from peg_ctrl.experiments.report.run_time import run_time
 from peg_ctrl.experiments.report.sections import (
@@ -26,7 +28,6 @@ from peg_ctrl.experiments.report.sections import (
     cell_section,
     comparison_section,
     cost_section,
-    header_section,
     phase_section,
     plots_section,
     summary_section,
@@ -70,6 +71,8 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
     against = against_section(rows, brought["arm"], brought["study"], brought.get("rerun")) if brought else []
     parts = [
         *header_section(exp, out_dir.name, rows, took),
+        *environment_lines(out_dir, rows),
+        *verification_lines(brought),
         *against,
         *summary_section(summary),
         *cell_section(rows),

@@ -9,9 +9,10 @@ they should take, and writes nothing.
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from peg_ctrl.cli.common import add_out, add_set
 from peg_ctrl.errors import ConfigError
@@ -27,8 +28,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "compare",
         help="run a new arm against a committed study",
         description="Run one new arm on a committed study's grid and seeds and compare it with the "
-        "study's arms, whose episodes come from the committed run (a sample of each is rerun first "
-        "and must reproduce). Writes DIR/report.md (the new arm against each study arm: success with "
+        "study's arms, whose episodes come from the committed run (a sample of each is rerun first and "
+        "classed reproduced, agrees or differs; only differs stops it: docs/reproducibility.md). "
+        "Writes DIR/report.md (the new arm against each study arm: success with "
         "Wilson intervals, peak force, time, Holm-corrected p-values), the tables and plots. Rerunning "
         "the same command resumes.",
         epilog="example: peg-sim compare contact_hard --controller my_ctrl.py:MyConfig --strategy align "
@@ -101,12 +103,31 @@ def run(args: argparse.Namespace) -> int:
     wins = sum(r["status"] == "success" for r in mine)
     verified = sum(len(s) for s in comp.sample.values())
     arms = len(comp.study_jobs)
+    record = json.loads((out / "compare.json").read_text())
+    for line in _verification_lines(record):
+        print(line)
     print(
         f"{comp.arm}: {wins}/{len(mine)} inserted; {len(rows) - len(mine)} episodes of {arms} "
         f"{comp.study} arms from the committed run ({verified} rerun to verify them); "
         f"{time.perf_counter() - started:.0f} s; wrote {out / 'report.md'}"
     )
     return 0
+
+
+def _verification_lines(record: dict[str, Any]) -> list[str]:
+    """What the verification found: the environment's differences from the study's, and each
+    study arm's class (docs/reproducibility.md)."""
+    env = record.get("environment") or {}
+    differ = env.get("differences") or []
+    lines = [
+        f"environment {env.get('here', '?')}: " + ("the study's in everything recorded" if not differ else "")
+    ]
+    lines[0] += "; ".join(differ) if differ else ""
+    for arm, v in record.get("verified", {}).items():
+        lines.append(f"  {record['study']} {arm}: {v['class']} ({v['detail']})")
+    for arm in record.get("rerun", []):
+        lines.append(f"  {record['study']} {arm}: rerun here in full")
+    return lines
 
 
 def _dry_run(comp: Comparison, out: Path, workers: int, rerun_baselines: bool) -> list[str]:

@@ -30,6 +30,7 @@ import numpy as np
 from peg_ctrl.config import ConfigError, load, to_dict
 from peg_ctrl.controllers import PDConfig
 from peg_ctrl.controllers.base import ControllerConfig
+from peg_ctrl.environment import environment_id
 from peg_ctrl.errors import FAILURE_REASONS, OutputError, OutputWarning
 from peg_ctrl.io import atomic_write_text, remove_stale_temps, to_json
 from peg_ctrl.planners import PLANNERS, MotionLimits, make_planner
@@ -556,6 +557,7 @@ def _result(
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
         **loop_fields(loop),
+        environment=environment_id(),
     )
 
 

@@ -32,10 +32,11 @@ from numpy.typing import NDArray
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.controllers.base import Controller, ControlOutput
+from peg_ctrl.environment import start_perturbation
 from peg_ctrl.errors import DivergenceError, EpisodeFailure
 from peg_ctrl.sim.belief import Belief
 from peg_ctrl.sim.ft_model import FTSensorModel, FTSensorStream
-from peg_ctrl.sim.scene import HOME_KEY, SceneConfig, contact_sensor_name
+from peg_ctrl.sim.scene import HOME_KEY, SLIDE_JOINTS, SceneConfig, contact_sensor_name
 from peg_ctrl.sim.state import BLOCK_PEG, ControlState, PegObservation, SensorBlock, StateReader
 from peg_ctrl.tasks.base import Evaluation, Observation, Task, belief_task, check_capabilities
 from peg_ctrl.tasks.monitors import ContactHistory, ContactMonitor, DivergenceMonitor, GraspMonitor
@@ -333,6 +334,9 @@ class Loop:
         data = self.data
         mujoco.mj_resetDataKeyframe(self.model, data, self._home)
         self.task.reset(self.model, data, rng)
+        # PEG_CTRL_START_PERTURBATION: the gripper's start moved along x by a last-bit amount, to
+        # measure how far such a difference carries (peg_ctrl.experiments.reproduction)
+        data.qpos[self.model.joint(SLIDE_JOINTS[0]).qposadr[0]] += start_perturbation()
         mujoco.mj_forward(self.model, data)
         state = self.reader.control_state(data)
         if self.noise is not None:

@@ -275,6 +275,9 @@ class EpisodeResult:
             ),
         ),
     )
+    # The environment that ran it (peg_ctrl.environment.environment_id: the record is in the
+    # sweep's environment.json); None in runs made before it. Not compared between reruns.
+    environment: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

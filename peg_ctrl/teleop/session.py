@@ -25,6 +25,7 @@ from peg_ctrl.commands import JAW_SEP_MAX_M, quat_to_euler
 from peg_ctrl.config import to_dict
 from peg_ctrl.controllers import ControllerConfig
 from peg_ctrl.controllers.base import Controller
+from peg_ctrl.environment import environment_id
 from peg_ctrl.errors import EpisodeFailure
 from peg_ctrl.io import atomic_write_text, to_json
 from peg_ctrl.run.episode import (
@@ -280,6 +281,7 @@ class TeleopSession:
             "peg_radial_m": check.radial_m,
             "peg_bottom_z_m": check.bottom_z_m,
             **loop_fields(self.loop),
+            "environment": environment_id(),
         }
 
     # -- overlay ------------------------------------------------------------------------------

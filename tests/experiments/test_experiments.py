@@ -688,7 +688,7 @@ def test_a_float_field_added_to_the_result_reaches_episodes_csv_and_the_summary(
     with open(tmp_path / "episodes.csv", newline="") as fh:
         reader = csv.DictReader(fh)
         header, rows = list(reader.fieldnames or []), list(reader)
-    assert header[header.index("peak_force_10ms_n") + 1 :] == ["squeeze_n", "wobble_m", "log_path"]
+    assert header[header.index("environment") + 1 :] == ["squeeze_n", "wobble_m", "log_path"]
     assert [float(r["squeeze_n"]) for r in rows] == [1.0, 2.0, 3.0, 40.0, 50.0, 60.0]
     with open(tmp_path / "summary.csv", newline="") as fh:
         summary = {r["controller"]: r for r in csv.DictReader(fh)}
@@ -702,8 +702,8 @@ def test_a_float_field_added_to_the_result_reaches_episodes_csv_and_the_summary(
 
 
 def test_the_run_time_is_summed_over_the_invocations(tmp_path: Path) -> None:
+    from peg_ctrl.experiments.report.header import header_section
     from peg_ctrl.experiments.report.run_time import RUN_TIME_FILE, add_run_time, run_time
-    from peg_ctrl.experiments.report.sections import header_section
 
     assert run_time(tmp_path) is None
     assert add_run_time(tmp_path, 100.0) == (100.0, 1)
@@ -738,7 +738,7 @@ def test_the_report_names_the_task_from_the_data() -> None:
 
 def test_the_header_names_a_friction_time_with_the_profile() -> None:
     """A run with ``physics.friction_time`` is not the profile's physics: its report says so."""
-    from peg_ctrl.experiments.report.sections import header_section
+    from peg_ctrl.experiments.report.header import header_section
 
     rows = [{"controller": "pd"}]
     plain = header_section({"physics": {"profile": "precision", "friction_time": None}}, "x", rows, None)[2]
@@ -753,7 +753,7 @@ def test_the_header_says_what_the_arms_sensed() -> None:
     """Every report names its sensor model: the F/T sensor, the hand's position, velocity and
     orientation, the camera's noise on the hole, the drawing; a key the grid sweeps varies per
     cell, and results without a recorded domain say so."""
-    from peg_ctrl.experiments.report.sections import header_section
+    from peg_ctrl.experiments.report.header import header_section
 
     rows = [{"controller": "pd"}]
     real = {

@@ -56,6 +56,7 @@ COMMITTED_COLUMNS = (
     "phantom_contacts",
     "friction_time_s",
     "peak_force_10ms_n",
+    "environment",
 )
 
 
