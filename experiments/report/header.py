@@ -41,11 +41,16 @@ def header_section(
         "",
         f"{len(rows)} episodes: arms {', '.join(dict.fromkeys(arm_of(r) for r in rows))}; "
         f"planners {', '.join(exp.get('planners', []))}; clearances "
-        f"{clearances}; {len(exp.get('seeds', []))} seeds; physics profile {profile}." + took,
+        f"{clearances}; {_count(exp.get('seeds', []))} seeds; physics profile {profile}." + took,
         "",
         sensing_line(exp),
         "",
     ]
+
+
+def _count(seeds: int | list[int]) -> int:
+    """How many seeds: an experiment gives a count (``seeds: 5``, ``--set seeds=1``) or a list."""
+    return seeds if isinstance(seeds, int) else len(seeds)
 
 
 def _gridded(grid: dict[str, Any]) -> set[str]:

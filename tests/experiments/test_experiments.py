@@ -715,6 +715,9 @@ def test_the_run_time_is_summed_over_the_invocations(tmp_path: Path) -> None:
     )
     assert header_section({}, "x", rows, (9.0, 1))[2].endswith(" Run time 9 s.")
     assert "Run time" not in header_section({}, "x", rows, None)[2]
+    # a comparison's experiment keeps --set seeds=1 as a count
+    assert "; 1 seeds;" in header_section({"seeds": 1}, "x", rows, None)[2]
+    assert "; 2 seeds;" in header_section({"seeds": [3, 4]}, "x", rows, None)[2]
     (tmp_path / RUN_TIME_FILE).write_text("{")  # damaged: not known, and replaced
     assert run_time(tmp_path) is None and add_run_time(tmp_path, 1.0) == (1.0, 1)
 
