@@ -1,7 +1,8 @@
 """CI keeps the committed studies honest: one episode of each committed study (its cheapest that
 touches the block) rerun on this machine and classed under the rule ``peg-sim compare`` applies
-(peg_ctrl.experiments.baseline): a change that moves a study fails here, at landing, not on a
-user's machine. And every study records what it was made with, and every arm its calibration."""
+(peg_ctrl.experiments.baseline), and bit for bit where this machine's environment is one the study
+records as reproducing it: a change that moves a study fails here, at landing, not on a user's
+machine. And every study records what it was made with, and every arm its calibration."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import json
 
 import pytest
 
-from peg_ctrl.environment import ENVIRONMENT_FILE
+from peg_ctrl.environment import ENVIRONMENT_FILE, differences, environment
 from peg_ctrl.experiments.baseline import CLASSES, classify, committed_studies, load_calibration, tolerance
 from peg_ctrl.experiments.config import Job
 from peg_ctrl.experiments.reproduction import load_study
@@ -62,6 +63,11 @@ def test_a_rerun_of_each_committed_study_is_not_classed_differs(reruns: dict, na
     verdict = classify(committed, fresh, tolerance(name, job.arm))
     assert verdict.cls in CLASSES
     assert verdict.cls != "differs", f"{name} {job.arm} episode {job.key}: {verdict.detail()}"
+    # In an environment the study records as reproducing it, nothing may move at all: a change
+    # that moves only what follows the first contact fails here too.
+    records = json.loads((STUDIES[name] / ENVIRONMENT_FILE).read_text()).values()
+    if any(not differences(record, environment()) for record in records):
+        assert verdict.cls == "reproduced", f"{name} {job.arm} episode {job.key}: {verdict.detail()}"
 
 
 @pytest.mark.parametrize("name", sorted(STUDIES))
