@@ -10,8 +10,8 @@ result. Contact amplifies such a difference into another trajectory. :func:`envi
 everything of that kind this process can read; :func:`differences` names what differs between
 two records.
 
-This module reads the environment and imports nothing of the package but its own standard
-library (a foundation layer, docs/architecture.md); numpy is looked up only once imported.
+This module reads the environment and imports nothing of the package but ``errors`` (a
+foundation layer, docs/architecture.md); numpy is looked up only once imported.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ import sys
 from importlib import metadata
 from pathlib import Path
 from typing import Any
+
+from peg_ctrl.errors import ConfigError
 
 __all__ = [
     "PACKAGES",
@@ -85,7 +87,7 @@ def start_perturbation() -> float:
     """The start perturbation [m] of ``PEG_CTRL_START_PERTURBATION`` (0 when unset).
 
     Raises:
-        ValueError: the variable is set to something that is not a finite number below 1 mm.
+        ConfigError: the variable is set to something that is not a finite number below 1 mm.
     """
     text = os.environ.get(PERTURBATION_VARIABLE, "").strip()
     if not text:
@@ -95,7 +97,7 @@ def start_perturbation() -> float:
     except ValueError:
         value = float("nan")
     if not abs(value) < 1e-3:
-        raise ValueError(f"{PERTURBATION_VARIABLE}={text!r}: a start perturbation in metres, |x| < 1e-3")
+        raise ConfigError(f"{PERTURBATION_VARIABLE}={text!r}: a start perturbation in metres, |x| < 1e-3")
     return value
 
 

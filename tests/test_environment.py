@@ -18,6 +18,7 @@ from peg_ctrl.environment import (
     environment_id,
     start_perturbation,
 )
+from peg_ctrl.errors import ConfigError
 
 
 def test_the_record_names_versions_cpu_blas_and_the_lock() -> None:
@@ -56,7 +57,7 @@ def test_the_start_perturbation_reads_metres(
 @pytest.mark.parametrize("text", ["abc", "nan", "0.01"])
 def test_a_bad_start_perturbation_is_named(monkeypatch: pytest.MonkeyPatch, text: str) -> None:
     monkeypatch.setenv("PEG_CTRL_START_PERTURBATION", text)
-    with pytest.raises(ValueError, match=f"PEG_CTRL_START_PERTURBATION='{text}'"):
+    with pytest.raises(ConfigError, match=f"PEG_CTRL_START_PERTURBATION='{text}'"):
         start_perturbation()
 
 
