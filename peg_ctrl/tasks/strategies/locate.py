@@ -56,7 +56,8 @@ from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseSpec, Timeout, TrajectorySequence
 from peg_ctrl.tasks.strategies.base import HeldInsertion, TaskDisturbance
-from peg_ctrl.tasks.strategies.probe import PAD_NORMAL, ProbeConfig, ProbeStrategy, WallPush
+from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
+from peg_ctrl.tasks.strategies.skills import PAD_NORMAL, WallPush
 
 __all__ = ["LocateConfig", "LocateStrategy", "SideTouches", "locate_across", "locate_end", "pair_offset"]
 

@@ -13,7 +13,8 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from peg_ctrl.sim.belief import HoleBelief
-from peg_ctrl.tasks.strategies.probe import ProbeConfig, RockCalibration
+from peg_ctrl.tasks.strategies.probe import ProbeConfig
+from peg_ctrl.tasks.strategies.skills import RockCalibration
 
 CFG = ProbeConfig()
 CENTRE = (0.2, 0.0)  # the observed hole [m]
