@@ -16,7 +16,8 @@ from peg_ctrl.errors import ConfigError
 from peg_ctrl.planners.base import Waypoint
 from peg_ctrl.run.episode import EpisodeConfig, build_loop, episode_config_from_mapping
 from peg_ctrl.run.loop import StepInfo
-from peg_ctrl.tasks.strategies.locate import LocateConfig, locate_across, locate_end, pair_offset, turn
+from peg_ctrl.tasks.strategies.locate import LocateConfig
+from peg_ctrl.tasks.strategies.skills.side_touch import locate_across, locate_end, pair_offset, turn
 
 
 @pytest.mark.parametrize("delta", [(0.003, -0.002), (-0.0054, 0.0), (0.0, 0.0)])
@@ -177,7 +178,7 @@ def test_an_approach_that_never_gets_going_is_a_stall() -> None:
     at speed before the command moves has not followed it."""
     from types import SimpleNamespace
 
-    from peg_ctrl.tasks.strategies.locate import SideTouches
+    from peg_ctrl.tasks.strategies.skills import SideTouches
 
     def touches(hand_speed: float) -> SideTouches:
         st = object.__new__(SideTouches)
@@ -219,7 +220,7 @@ def test_three_touches_pair_the_side_a_turn_moves_the_end_along(
 ) -> None:
     """The side touched twice is the one along whose approach a turn by ``yaw`` moves an end
     that sits off across the pads the most; four touches keep both sides' pairs."""
-    from peg_ctrl.tasks.strategies.locate import SideTouches
+    from peg_ctrl.tasks.strategies.skills import SideTouches
 
     st = object.__new__(SideTouches)
     st.cfg = LocateConfig(side_touches=3)

@@ -2,9 +2,10 @@
 force-controlled descent that stops on whatever it meets, read from the pose), the
 :class:`RockCalibration` (the peg's tilt in the hand from three landings on the face), the
 :class:`Centring` (the end pushed against the mouth's walls: :class:`WallPush`) and its pressed
-circle (:class:`PressedCircle`), and the :class:`ProbeSearch` (landings and bearing presses a
-belief chooses until the end is over the bore). ``probe`` and ``locate`` play them
-(docs/contact_real.md); each takes the strategy that plays it as a :class:`ProbeHost`.
+circle (:class:`PressedCircle`), the :class:`ProbeSearch` (landings and bearing presses a
+belief chooses until the end is over the bore) and the :class:`SideTouches` (the end against the
+block's sides, straight and turned). ``probe`` and ``locate`` play them (docs/contact_real.md);
+each takes the strategy that plays it as a :class:`ProbeHost`.
 """
 
 from peg_ctrl.tasks.strategies.skills.centring import Centring, PressedCircle, WallPush
@@ -12,6 +13,7 @@ from peg_ctrl.tasks.strategies.skills.common import LAND_AXES, NO_AXES, PRESS_AX
 from peg_ctrl.tasks.strategies.skills.landing import Landing, ProbeHost
 from peg_ctrl.tasks.strategies.skills.rock import PAD_NORMAL, RockCalibration, upright
 from peg_ctrl.tasks.strategies.skills.search import ProbeSearch
+from peg_ctrl.tasks.strategies.skills.side_touch import SideTouches
 
 __all__ = [
     "LAND_AXES",
@@ -25,6 +27,7 @@ __all__ = [
     "ProbeHost",
     "ProbeSearch",
     "RockCalibration",
+    "SideTouches",
     "WallPush",
     "upright",
 ]
