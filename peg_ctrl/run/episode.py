@@ -97,6 +97,12 @@ class DomainConfig:
     position_noise: float = 0.0  # std of noise on the measured gripper position [m]
     velocity_noise: float = 0.0  # std of noise on the measured gripper velocity [m/s, rad/s]
     orientation_noise: float = 0.0  # std of the measured gripper orientation's error about each axis [rad]
+    # > 0: the position's error is a robot's repeatability, not white: a slowly varying error of
+    # std position_noise, correlated over this time [s] (it holds over a touch), plus the white
+    # position_white_noise [m]; the linear velocity is then differenced from the sensed positions
+    # (velocity_noise stays on the angular velocity). 0: white noise at every reading.
+    position_error_time: float = 0.0
+    position_white_noise: float = 0.0
     force_noise: float = 0.0  # std of noise on each F/T force channel [N] (torques: torque_noise)
     torque_noise: float = 0.0  # std of noise on each F/T torque channel [N m]
     ft_latency: float = 0.0  # the F/T reading arrives this late [s]
@@ -109,7 +115,13 @@ class DomainConfig:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
                 raise ConfigError(f"domain.{name} must be [low, high] with 0 < low <= high, got {[lo, hi]}")
-        for name in ("position_noise", "velocity_noise", "orientation_noise", *FT_DOMAIN_FIELDS):
+        if self.position_white_noise and not self.position_error_time:
+            raise ConfigError(
+                "domain.position_white_noise is the white part of a robot's position error: set "
+                "domain.position_error_time > 0 too (0: position_noise is white already)"
+            )
+        kinematic = ("position_noise", "velocity_noise", "orientation_noise")
+        for name in (*kinematic, "position_error_time", "position_white_noise", *FT_DOMAIN_FIELDS):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"domain.{name} must be finite and >= 0, got {value!r}")
@@ -138,7 +150,12 @@ class DomainConfig:
     @property
     def noisy(self) -> bool:
         """Whether any sensor noise is on (an ``ideal`` F/T preset is none)."""
-        kinematic = (self.position_noise, self.velocity_noise, self.orientation_noise)
+        kinematic = (
+            self.position_noise,
+            self.velocity_noise,
+            self.orientation_noise,
+            self.position_white_noise,
+        )
         return any(v > 0 for v in kinematic) or self.ft_model.noisy
 
     @property
@@ -281,6 +298,8 @@ def build_loop(cfg: EpisodeConfig, recorders: list[Recorder] | None = None) -> L
             position=d.position_noise,
             velocity=d.velocity_noise,
             orientation=d.orientation_noise,
+            position_error_time=d.position_error_time,
+            position_white=d.position_white_noise,
             ft=d.ft_model,
             dt=cfg.controller.control_dt,  # one F/T reading per control period
             rng=np.random.default_rng([cfg.seed, 2]),

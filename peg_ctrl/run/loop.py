@@ -22,6 +22,7 @@ physics timestep.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import NamedTuple, Protocol
@@ -54,7 +55,14 @@ class SensorNoise:
     (:class:`~peg_ctrl.sim.ft_model.FTSensorStream`: noise per channel, latency, bias drift);
     everything drawn from ``rng``, in that order.
 
-    :meth:`reset` at the start of an episode with the true state (it fills the F/T delay line).
+    With ``position_error_time`` > 0 the position's error is a robot's: a smooth, slowly varying
+    error (independent Gaussian knots every ``position_error_time`` [s], joined by half-cosines,
+    scaled so that its standard deviation over time is ``position``: a repeatability that holds
+    over a touch), plus white noise ``position_white`` [m]; the linear velocity is differenced
+    from the sensed positions, as a robot's is (``velocity`` stays on the angular velocity).
+
+    :meth:`reset` at the start of an episode with the true state (it fills the F/T delay line,
+    and draws the robot's error from its stationary distribution).
     """
 
     def __init__(
@@ -66,17 +74,47 @@ class SensorNoise:
         dt: float,
         rng: np.random.Generator,
         orientation: float = 0.0,
+        position_error_time: float = 0.0,
+        position_white: float = 0.0,
     ) -> None:
         self.position, self.velocity, self.orientation = position, velocity, orientation
         self.rng = rng
         self.ft = FTSensorStream(ft, dt=dt, rng=rng)
         self._kinematic = position > 0 or velocity > 0
+        self._robot = position_error_time > 0
+        self._dt, self._white = dt, position_white
+        self._step = dt / position_error_time if self._robot else 0.0  # of the way between knots
+        # the half-cosine blend of two independent knots has 3/4 of a knot's variance on average
+        self._knot_sigma = position / math.sqrt(0.75)
+        self._knots = np.zeros((2, 3))
+        self._phase = 0.0
+        self._last: NDArray[np.float64] | None = None  # the last sensed position (robot model)
 
     def reset(self, s: ControlState) -> None:
+        if self._robot:
+            self._knots = self.rng.normal(0.0, self._knot_sigma, (2, 3))
+            self._phase = float(self.rng.uniform())
+            self._last = None
         self.ft.reset(s.ft_wrench)
 
+    def _robot_pose(self, s: ControlState) -> ControlState:
+        """The position with a robot's slowly varying error and white noise; the velocity differenced."""
+        rng = self.rng
+        self._phase += self._step
+        while self._phase >= 1.0:
+            self._knots = np.stack([self._knots[1], rng.normal(0.0, self._knot_sigma, 3)])
+            self._phase -= 1.0
+        w = 0.5 * (1.0 - math.cos(math.pi * self._phase))
+        error = (1.0 - w) * self._knots[0] + w * self._knots[1]
+        p = s.p_world + error + rng.normal(0.0, self._white, 3)
+        v = s.v_world if self._last is None else (p - self._last) / self._dt
+        self._last = p
+        return s._replace(p_world=p, v_world=v, omega_body=s.omega_body + rng.normal(0.0, self.velocity, 3))
+
     def apply(self, s: ControlState) -> ControlState:
-        if self._kinematic:
+        if self._robot:
+            s = self._robot_pose(s)
+        elif self._kinematic:
             rng = self.rng
             s = s._replace(
                 p_world=s.p_world + rng.normal(0.0, self.position, 3),

@@ -369,3 +369,53 @@ def test_the_loop_reads_no_belief_for_a_controller_that_does_not_observe_them(mo
     loop.reset(np.random.default_rng(0))
     loop.run(max_steps=100)
     assert loop.steps == 5 and listening.heard == []
+
+
+def test_a_robots_position_error_holds_over_a_touch_and_its_velocity_is_differenced(
+    model: mujoco.MjModel,
+) -> None:
+    """domain.position_error_time > 0: the sensed position's error is a smooth, slowly varying
+    error of standard deviation ``position`` (knots every tau), plus white noise; the sensed
+    linear velocity is the difference of the sensed positions. A still hand: the error's std
+    matches, it holds over a touch (correlated above 0.9 over 50 ms) and an average over 20 ms
+    does not average it away (as white noise would), and the velocity's std is the white
+    noise's, sqrt(2) * white / dt, within 10 %: the slow error adds almost nothing to it."""
+    sigma, tau, white, dt = 1e-4, 0.5, 2e-6, 0.001
+    loop = make(model)
+    loop.reset(np.random.default_rng(0))
+    state = loop.state()
+    errors, velocities = [], []
+    for seed in range(8):  # independent episodes: the error's level differs between them
+        noise = SensorNoise(
+            position=sigma,
+            velocity=0.0,
+            ft=FTSensorModel(),
+            dt=dt,
+            rng=np.random.default_rng(seed),
+            position_error_time=tau,
+            position_white=white,
+        )
+        noise.reset(state)
+        readings = [noise.apply(state) for _ in range(20000)]
+        errors.append(np.array([r.p_world - state.p_world for r in readings]))
+        velocities.append(np.array([r.v_world for r in readings[1:]]))
+    e = np.concatenate(errors)
+    assert e.std() == pytest.approx(sigma, rel=0.25)
+    lag = int(0.1 * tau / dt)
+    # about the known zero mean (a sample mean over a few tau would bias it)
+    corr = sum(float(np.sum(x[:-lag] * x[lag:])) for x in errors) / sum(
+        float(np.sum(x[:-lag] ** 2)) for x in errors
+    )
+    assert corr > 0.9
+    window = np.concatenate([x[: (len(x) // 20) * 20].reshape(-1, 20, 3).mean(axis=1) for x in errors])
+    assert window.std() > 0.9 * e.std()  # 20 readings averaged: the repeatability stays
+    v = np.concatenate(velocities)
+    assert v.std() == pytest.approx(np.sqrt(2.0) * white / dt, rel=0.1)  # white dominates the difference
+
+
+def test_a_robots_white_position_noise_needs_its_error_time() -> None:
+    from peg_ctrl.run.episode import DomainConfig
+
+    with pytest.raises(ConfigError, match="domain.position_white_noise"):
+        DomainConfig(position_white_noise=1e-6)
+    assert DomainConfig(position_error_time=0.5, position_white_noise=1e-6).noisy
