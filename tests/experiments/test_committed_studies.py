@@ -6,6 +6,7 @@ machine. And every study records what it was made with, and every arm its calibr
 
 from __future__ import annotations
 
+import functools
 import json
 
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from peg_ctrl.environment import ENVIRONMENT_FILE, differences, environment
 from peg_ctrl.experiments.baseline import CLASSES, classify, committed_studies, load_calibration, tolerance
 from peg_ctrl.experiments.config import Job
-from peg_ctrl.experiments.reproduction import load_study
+from peg_ctrl.experiments.reproduction import Study, load_study
 from peg_ctrl.experiments.runner import collect_rows, run_jobs
 
 #: Committed studies that no longer run on this code, and why: kept as the record of what they found.
@@ -24,9 +25,15 @@ HISTORICAL = {
 STUDIES = {name: path for name, path in committed_studies().items() if name not in HISTORICAL}
 
 
+@functools.cache
+def _study(name: str) -> Study:
+    """The study with every committed episode of every arm (read once: it expands the grid)."""
+    return load_study(name, per_arm=10**6)
+
+
 def _cheapest(name: str) -> tuple[Job, dict[str, str]]:
     """The study's committed episode that touched the block in the least wall time."""
-    study = load_study(name, per_arm=10**6)
+    study = _study(name)
     touched = [
         (float(row["wall_time_s"]), job.key, job)
         for jobs in study.sample.values()
@@ -82,7 +89,7 @@ def test_each_committed_study_records_its_environment_and_lock(name: str) -> Non
 def test_every_committed_study_arm_has_measured_tolerances() -> None:
     studies = load_calibration()["studies"]
     for name in STUDIES:
-        arms = set(load_study(name, per_arm=1).sample)
+        arms = set(_study(name).sample)
         assert arms <= set(studies.get(name, {})), (
             f"{name}: uncalibrated arms {arms - set(studies.get(name, {}))}"
         )
