@@ -27,8 +27,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import peg_ctrl
 from peg_ctrl.errors import ConfigError
-from peg_ctrl.experiments.config import Job, expand, experiment_from_mapping
+from peg_ctrl.experiments.config import ExperimentConfig, Job, expand, experiment_from_mapping
 from peg_ctrl.experiments.report import read_rows
 from peg_ctrl.run.result import WALL_CLOCK_FIELDS
 
@@ -42,6 +43,7 @@ __all__ = [
     "Verdict",
     "committed_studies",
     "find_study",
+    "jobs_by_arm",
     "match_committed",
     "sample_jobs",
     "differences",
@@ -49,6 +51,7 @@ __all__ = [
     "classify_arm",
     "tolerance",
     "load_calibration",
+    "calibration_path",
     "CALIBRATION",
 ]
 
@@ -121,6 +124,14 @@ def _json(config: Any) -> str:
     from peg_ctrl.config import to_dict
 
     return json.dumps(to_dict(config), sort_keys=True)
+
+
+def jobs_by_arm(exp: ExperimentConfig) -> dict[str, tuple[Job, ...]]:
+    """The experiment's episodes by arm, in its job order."""
+    found: dict[str, list[Job]] = {}
+    for job in expand(exp):
+        found.setdefault(job.arm, []).append(job)
+    return {arm: tuple(jobs) for arm, jobs in found.items()}
 
 
 def match_committed(study_dir: Path, study_jobs: dict[str, tuple[Job, ...]]) -> dict[str, dict[str, str]]:
@@ -259,13 +270,15 @@ def classify_arm(verdicts: list[Verdict]) -> Verdict:
     return max(verdicts, key=lambda v: CLASSES.index(v.cls))
 
 
+def calibration_path() -> Path:
+    """The packaged calibration, ``peg_ctrl/data/reproduction.json`` (read here, written by
+    ``reproduction calibrate``)."""
+    return Path(peg_ctrl.__file__).parent / "data" / CALIBRATION
+
+
 def load_calibration(path: Path | None = None) -> dict[str, Any]:
-    """The packaged calibration (``peg_ctrl/data/reproduction.json``), or ``{}`` when none."""
-    if path is None:
-        resource = resources.files("peg_ctrl.data") / CALIBRATION
-        if not resource.is_file():
-            return {}
-        return dict(json.loads(resource.read_text()))
+    """The calibration at ``path`` (default: the packaged one), or ``{}`` when none."""
+    path = path or calibration_path()
     return dict(json.loads(path.read_text())) if path.is_file() else {}
 
 

@@ -38,6 +38,7 @@ from peg_ctrl.experiments.baseline import (
     classify_arm,
     committed_studies,
     find_study,
+    jobs_by_arm,
     match_committed,
     sample_jobs,
     tolerance,
@@ -216,9 +217,7 @@ def _jobs(
     Raises:
         ConfigError: the new arm's episodes are one of the study arms'.
     """
-    study_jobs: dict[str, list[Job]] = {}
-    for job in expand(study_exp):
-        study_jobs.setdefault(job.arm, []).append(job)
+    study_jobs = jobs_by_arm(study_exp)
     new_ctrl = new_exp.controllers[0]
     mark = NEW_ARM_MARK if any(c.name == new_ctrl.name for c in study_exp.controllers) else ""
     new_jobs = tuple(dataclasses.replace(j, controller_label=new_ctrl.name + mark) for j in expand(new_exp))
@@ -228,7 +227,7 @@ def _jobs(
         raise ConfigError(
             f"the new arm {new_jobs[0].arm} runs the same episodes as {name}'s arm {same}: nothing to compare"
         )
-    return {a: tuple(jobs) for a, jobs in study_jobs.items()}, new_jobs
+    return study_jobs, new_jobs
 
 
 def _study_experiment(study_dir: Path, sets: list[str]) -> tuple[str, dict[str, Any], ExperimentConfig]:

@@ -35,23 +35,23 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import peg_ctrl
 from peg_ctrl.environment import ENVIRONMENT_FILE, PERTURBATION_VARIABLE, environment
 from peg_ctrl.errors import ConfigError
 from peg_ctrl.experiments.baseline import (
-    CALIBRATION,
     FACTOR,
     Tolerance,
+    calibration_path,
     classify,
     classify_arm,
     differences,
     find_study,
+    jobs_by_arm,
     load_calibration,
     match_committed,
     sample_jobs,
     tolerance,
 )
-from peg_ctrl.experiments.config import Job, expand, experiment_from_mapping
+from peg_ctrl.experiments.config import Job, experiment_from_mapping
 from peg_ctrl.experiments.runner import collect_rows, run_jobs
 from peg_ctrl.io import atomic_write_text, to_json
 
@@ -105,10 +105,7 @@ class Study:
 def load_study(study: str, per_arm: int) -> Study:
     directory = find_study(study)
     data = json.loads((directory / "experiment.json").read_text())
-    by_arm: dict[str, list[Job]] = {}
-    for job in expand(experiment_from_mapping(data)):
-        by_arm.setdefault(job.arm, []).append(job)
-    jobs = {a: tuple(j) for a, j in by_arm.items()}
+    jobs = jobs_by_arm(experiment_from_mapping(data))
     committed = match_committed(directory, jobs)
     name = str(data.get("name") or directory.name)
     return Study(name, directory, sample_jobs(jobs, committed, per_arm), committed)
@@ -117,20 +114,20 @@ def load_study(study: str, per_arm: int) -> Study:
 @contextlib.contextmanager
 def _environ(changes: dict[str, str | None]) -> Iterator[None]:
     """``os.environ`` changed for the workers spawned inside (each starts a new interpreter)."""
+
+    def apply(values: dict[str, str | None]) -> None:
+        for k, v in values.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
     before = {k: os.environ.get(k) for k in changes}
     try:
-        for k, v in changes.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+        apply(changes)
         yield
     finally:
-        for k, v in before.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+        apply(before)
 
 
 def rerun(jobs: list[Job], out: Path, changes: dict[str, str | None], workers: int, desc: str) -> None:
@@ -164,7 +161,7 @@ def _drift(committed: dict[str, str], fresh: dict[str, Any]) -> tuple[dict[str, 
 def calibrate(studies: list[str], scratch: Path, workers: int, path: Path | None = None) -> dict[str, Any]:
     """Measure each study arm's drift under :data:`PERTURBATIONS` and merge it into the
     calibration at ``path`` (default: the packaged ``reproduction.json``)."""
-    path = path or Path(peg_ctrl.__file__).parent / "data" / CALIBRATION
+    path = path or calibration_path()
     data = load_calibration(path) or {"factor": FACTOR, "studies": {}}
     data.update(
         {

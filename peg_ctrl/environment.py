@@ -176,9 +176,8 @@ def _blas() -> dict[str, Any] | None:
             name = getattr(lib, f"{prefix}openblas_get_corename{suffix}", None)
             if name is None:
                 continue
-            name.restype = config_restype = ctypes.c_char_p
             config = getattr(lib, f"{prefix}openblas_get_config{suffix}")
-            config.restype = config_restype
+            name.restype = config.restype = ctypes.c_char_p
             threads = getattr(lib, f"{prefix}openblas_get_num_threads{suffix}")
             return {
                 "library": "OpenBLAS",
