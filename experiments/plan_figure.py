@@ -5,9 +5,11 @@ belief's spread and the depth against time.
 
 The episode is run again from its ``config.json`` (the same seed: the same episode, checked
 against its ``summary.json``: the peak force and the outcome must agree, or it stops). At every
-replan of the ``plan`` phase it records the peg's true lower end against the true hole, the
+replan of the ``handover`` phase it records the peg's true lower end against the true hole, the
 belief's mean (where the planner thinks the end is against the hole) and its spread, and writes
-the figure and the numbers beside it (``.json``).
+the figure and the numbers beside it (``.json``). The committed plan study's episodes name the
+strategy ``plan``, which it was called when they ran (now the planner over skills): their
+``config.json`` must name ``handover`` to be drawn again.
 """
 
 from __future__ import annotations

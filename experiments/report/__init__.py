@@ -32,6 +32,7 @@ from peg_ctrl.experiments.report.sections import (
     plots_section,
     summary_section,
 )
+from peg_ctrl.experiments.report.skills import skill_section
 from peg_ctrl.experiments.stats import summarise, wilson_interval
 from peg_ctrl.io import atomic_write_text
 
@@ -79,6 +80,7 @@ def write_report(out_dir: Path, *, elapsed_s: float | None = None) -> Path:
         *comparison_section(rows),
         # the phases are read from the episodes' logs: of a comparison's study arms only a sample ran here
         *phase_section(out_dir, rows if traced is None else [r for r in rows if arm_of(r) in traced]),
+        *skill_section(out_dir, rows, [k for k in rows[0] if "." in k] if rows else []),
         *cost_section(rows),
         *plots_section(rows, plots),
     ]

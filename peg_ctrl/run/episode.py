@@ -549,6 +549,7 @@ def _result(
     inserting = insertion_task(task)
     m = inserting.insertion.last if inserting is not None else None
     records = task.records
+    knowledge = getattr(task, "knowledge", None)  # the held insertion's belief (peg_ctrl.tasks.belief)
     grasp = loop.grasp
     time_to_insert = inserting.time_to_insert if inserting is not None else None
     fields = contact_fields(loop, m, seated=outcome.status == "success", assets=cfg.scene.assets)
@@ -575,6 +576,8 @@ def _result(
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
+        belief=list(knowledge.history) if knowledge is not None else [],
+        skills=list(getattr(getattr(task, "strategy", None), "skill_log", [])),
         **loop_fields(loop),
         environment=environment_id(),
     )

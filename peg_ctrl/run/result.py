@@ -244,6 +244,11 @@ class EpisodeResult:
     plot_path: str | None = field(default=None, metadata=_NO_COLUMN)
     video_path: str | None = field(default=None, metadata=_NO_COLUMN)
     phases: list[dict[str, Any]] = field(default_factory=list)
+    # The task's belief, reading by reading (peg_ctrl.tasks.belief: time, skill, bits, spreads);
+    # and the skills a planning strategy (plan) chose, with its decisions. The decisions carry
+    # the planner's own compute time (wall clock): the field is not compared between runs.
+    belief: list[dict[str, Any]] = field(default_factory=list)
+    skills: list[dict[str, Any]] = field(default_factory=list, metadata=metric(wall_clock=True))
     # What the control costs, in wall time: per control step (the whole controller), and per
     # solve of each of its optimisers (controllers.base.SolveTiming), with its period and its
     # real-time factor (mean solve time over its period). The solve_time_* fields repeat the

@@ -86,7 +86,10 @@ class HoleBelief:
         sigma: float,
         capture: float,
         spacing: float = 1e-4,
+        cov: ArrayLike | None = None,
     ) -> None:
+        """``cov`` (2 x 2) [m^2]: the prior's covariance, where it is not round (the task's
+        belief of where the end must go; ``sigma`` is then unused)."""
         if not (radius > 0 and sigma > 0 and capture > spacing > 0):
             raise ValueError(
                 f"need radius > 0, sigma > 0 and capture > spacing > 0, got radius {radius}, "
@@ -100,8 +103,12 @@ class HoleBelief:
         self._shape = gx.shape
         self._inside = (gx**2 + gy**2 <= radius * radius).ravel()
         self.points = self.centre + np.column_stack([gx.ravel(), gy.ravel()])[self._inside]
-        r2 = np.einsum("ij,ij->i", self.points - self.centre, self.points - self.centre)
-        self.weights = np.exp(-0.5 * r2 / (sigma * sigma))
+        d = self.points - self.centre
+        if cov is None:
+            r2 = np.einsum("ij,ij->i", d, d) / (sigma * sigma)
+        else:
+            r2 = np.einsum("ij,jk,ik->i", d, np.linalg.inv(np.asarray(cov, dtype=float)), d)
+        self.weights = np.exp(-0.5 * r2)
         self.weights /= self.weights.sum()
         k = int(np.floor(capture / spacing))
         kx, ky = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1), indexing="ij")

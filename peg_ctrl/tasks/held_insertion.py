@@ -66,6 +66,7 @@ from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor, lowpass_alpha
 from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Capabilities, Evaluation, Observation, PhaseRecord, TaskContext, TaskSpec
+from peg_ctrl.tasks.belief import TaskBelief
 from peg_ctrl.tasks.held_start import Disturbance, check_start, place_held_start
 from peg_ctrl.tasks.monitors import (
     ENTRY_MARGIN,
@@ -93,6 +94,8 @@ _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 _SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
 _SPEED_HZ = 5.0  # the sensed hand velocity's low-pass (encoder velocities are differences) [Hz]
 
+_PAD_NORMAL = np.array([1.0, 0.0, 0.0])  # the jaw's closing direction, gripper frame
+
 
 @dataclasses.dataclass(frozen=True)
 class HeldInsertionConfig(TaskSpec):
@@ -107,10 +110,21 @@ class HeldInsertionConfig(TaskSpec):
     start_height: float = 0.003  # the peg's lower end above the mouth at the start [m]
     grip_above_centre: float = 0.02  # pads above the peg's centre: the fingers clear the block [m]
     settle_time: float = 0.3  # hold after the start while the sensor is tared [s]
+    # The start: the believed lower end over the observed hole (a robot's start: it knows no
+    # other), or over the true one (every study before this field: the start then tells a
+    # strategy where the hole is to within the grasp's offset).
+    start_over_observed: bool = False
+    # The hand's position repeatability the cell states (a robot's datasheet, as one sigma) [m]:
+    # the skills' measurement models read their noise from it (the task's belief, knowledge).
+    pose_repeatability: float = 0.00003
 
     def __post_init__(self) -> None:
+        if not isinstance(self.start_over_observed, bool):
+            raise ConfigError(
+                f"task.start_over_observed must be true or false, got {self.start_over_observed!r}"
+            )
         for f in dataclasses.fields(self):
-            if f.name == "strategy":
+            if f.name in ("strategy", "start_over_observed"):
                 continue
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -285,6 +299,7 @@ class HeldInsertionTask(PlannedMoves):
         self._wrist = WristSensor(
             model, centre_body=self._b_body, dt=self.control_dt, force_hz=30.0, accel_hz=_ACCEL_HZ
         )
+        self._reset_knowledge(np.array([1.0, 0.0, 0.0, 0.0]))  # the hand's start orientation: start()
         self.strategy = self.cfg.strategy.build(self)
         self.machine = PhaseMachine(self.phase_table())
         self.seated.reset()
@@ -292,7 +307,28 @@ class HeldInsertionTask(PlannedMoves):
     def start(self, obs: Observation) -> None:
         s = obs.gripper
         self._goal = Waypoint.of(s.p_world, s.quat_world, 0.0)
+        self._reset_knowledge(s.quat_world)
         self.machine.start("settle", obs)
+
+    def _reset_knowledge(self, quat: NDArray[np.float64]) -> None:
+        """The task's belief over what the cell leaves open (:class:`TaskBelief`: its prior), in
+        the frame of the hand at ``quat``: the end can sit off the believed one across the pads
+        (horizontal, square to their closing direction, the gripper's x)."""
+        self.knowledge_quat = np.asarray(quat, dtype=float).copy()
+        closing = rotate(self.knowledge_quat, _PAD_NORMAL)
+        self.knowledge_across = np.array([-closing[1], closing[0]]) / math.hypot(closing[0], closing[1])
+        # A tilt about the pads' normal swings the end: grip_length (n x up) per radian, backwards.
+        swing = -self._grip_length * rotate(self.knowledge_quat, np.cross(_PAD_NORMAL, self._up_body))
+        self.knowledge = TaskBelief.prior(
+            self.observed_hole,
+            self.cfg.position_noise,
+            self.knowledge_across,
+            self.cfg.lateral_error,
+            self.cfg.tilt_error,
+            self.block_top,
+            self.cfg.drawing_tolerance,
+            swing[:2],
+        )
 
     def target(self, obs: Observation) -> GripperTarget:
         v = obs.gripper.v_world
@@ -360,6 +396,16 @@ class HeldInsertionTask(PlannedMoves):
         return self._grasp_body.copy()
 
     @property
+    def pose_repeatability(self) -> float:
+        """The hand's position repeatability the cell states [m] (``task.pose_repeatability``)."""
+        return self.cfg.pose_repeatability
+
+    @property
+    def drawing_tolerance(self) -> float:
+        """The block's tolerance on its drawing [m] (``task.drawing_tolerance``)."""
+        return self.cfg.drawing_tolerance
+
+    @property
     def grip_length(self) -> float:
         """From the pads to the peg's lower end, along its axis [m]."""
         return self._grip_length
@@ -382,10 +428,19 @@ class HeldInsertionTask(PlannedMoves):
         world-frame estimate: it does not move."""
         up_body = np.asarray(up_body, dtype=float) / np.linalg.norm(up_body)
         self.aligned_tilt = math.acos(max(-1.0, min(1.0, float(np.dot(up_body, self._up_body)))))
+        # The belief's reference moves with the revision: the end by as much as the believed one
+        # moved (in the belief's frame), the tilt by the turn about the pads' normal.
+        turn = math.atan2(
+            float(np.dot(np.cross(self._up_body, up_body), _PAD_NORMAL)),
+            float(np.dot(self._up_body, up_body)),
+        )
+        b_old = self._b_body
         self._up_body = up_body
         if grasp_shift is not None:
             self._grasp_body = self._grasp_body + np.asarray(grasp_shift, dtype=float)
         self._b_body = self._grasp_body - self._grip_length * up_body
+        moved = rotate(self.knowledge_quat, self._b_body - b_old)
+        self.knowledge.shift(end_x=float(moved[0]), end_y=float(moved[1]), tilt=turn)
         self.wrist.move_centre(self._b_body, state)
 
     def recalibrate(self, obs: Observation, *, quat: NDArray[np.float64] | None = None) -> None:

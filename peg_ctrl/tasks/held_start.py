@@ -35,6 +35,9 @@ class StartSpec(TaskDisturbance, Protocol):
     @property
     def start_height(self) -> float: ...
 
+    @property
+    def start_over_observed(self) -> bool: ...
+
 
 @dataclasses.dataclass(frozen=True)
 class Disturbance:
@@ -96,10 +99,14 @@ def place_held_start(
     up = rotate(q_peg, np.array([0.0, 0.0, 1.0]))
     up = up if up[2] > 0 else -up
     (hx, hy, top), sides = _place_block(model, rng, c.drawing_tolerance, scene, insertion, block_top)
+    observed = np.array([hx, hy]) + np.asarray(d.noise)
+    # The believed lower end starts over the hole the task believes in: the observed one (a
+    # robot's start), or the true one (``start_over_observed`` false: every earlier study).
+    over = observed if c.start_over_observed else np.array([hx, hy])
     mouth = np.array(
         [
-            hx + c.lateral_error * math.cos(d.lateral_direction),
-            hy + c.lateral_error * math.sin(d.lateral_direction),
+            over[0] + c.lateral_error * math.cos(d.lateral_direction),
+            over[1] + c.lateral_error * math.sin(d.lateral_direction),
             top,
         ]
     )
@@ -125,9 +132,9 @@ def place_held_start(
     )
     return HeldStart(
         disturbance=d,
-        b_body=rotate_inv(q_grip, b_world - (mouth - np.array([hx, hy, top]))),
+        b_body=rotate_inv(q_grip, b_world - (mouth - np.array([*over, top]))),
         up_body=rotate_inv(q_grip, np.array([0.0, 0.0, 1.0])),
-        observed_hole=np.array([hx, hy]) + np.asarray(d.noise),
+        observed_hole=observed,
         drawing_sides=sides,
     )
 

@@ -21,7 +21,12 @@ from peg_ctrl.experiments.runner import collect_rows, run_jobs
 HISTORICAL = {
     "contact": "its experiment.json sets task.contact_force, which the estimation refactor removed (the "
     "force strategies test against the sensor's noise since): its episodes cannot be rerun as they ran",
+    "plan": "its sampling_mpc arms ran the hand-over strategy when it was named plan (now handover; plan "
+    "is the planner over skills): its experiment.json and episode keys name plan, so a rerun would run "
+    "the other strategy (experiments/configs/plan.yaml runs the study again, as handover)",
 }
+#: How each historical study fails to load as it ran (a rename loads, as something else).
+_NO_LONGER = {"contact": "unknown field"}
 STUDIES = {name: path for name, path in committed_studies().items() if name not in HISTORICAL}
 
 
@@ -53,15 +58,22 @@ def reruns(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Job, dic
 
 
 def test_the_committed_studies_are_found() -> None:
-    assert {"contact_hard", "contact_real", "plan"} <= set(STUDIES) and len(STUDIES) >= 10
+    assert {"contact_hard", "contact_real"} <= set(STUDIES) and len(STUDIES) >= 10
 
 
-@pytest.mark.parametrize("name", sorted(HISTORICAL))
+@pytest.mark.parametrize("name", sorted(_NO_LONGER))
 def test_only_the_historical_studies_no_longer_load(name: str) -> None:
     from peg_ctrl.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="unknown field"):
+    with pytest.raises(ConfigError, match=_NO_LONGER[name]):
         load_study(name, per_arm=1)
+
+
+def test_the_plan_study_ran_the_strategy_now_named_handover() -> None:
+    """Its sampling_mpc arms name ``plan``, the hand-over that is ``handover`` now."""
+    path = committed_studies()["plan"] / "experiment.json"
+    arms = json.loads(path.read_text())["arms"]
+    assert arms["sampling_mpc(hypotheses=4)"] == ["plan"] and arms["mpc"] == ["locate"]
 
 
 @pytest.mark.parametrize("name", sorted(STUDIES))

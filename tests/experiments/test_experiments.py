@@ -332,8 +332,8 @@ def test_a_bad_linked_axis_is_named(axis: dict[str, object], message: str) -> No
         ("controllers: [pd]\nstrategies: [spiral]", "strategies: task 'pick_and_place' has no strategy"),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\nstrategies: [poke]",
-            "strategies[0]: unknown strategy 'poke'; known: align, force, locate, plan, probe, spiral, "
-            "straight, tilt",
+            "strategies[0]: unknown strategy 'poke'; known: align, force, handover, locate, plan, probe, "
+            "spiral, straight, tilt",
         ),
         (
             "controllers: [pd]\ntask: {name: held_insertion}\ngrid: {task.wobble: [1, 2]}",
@@ -396,17 +396,17 @@ def test_a_controller_named_twice_is_labelled_by_what_differs() -> None:
                 "pd",
             ],
             "task": {"name": "held_insertion"},
-            "strategies": ["plan", "straight"],
+            "strategies": ["handover", "straight"],
             "arms": {
-                "sampling_mpc(hypotheses=4)": ["plan"],
-                "sampling_mpc(hypotheses=1)": ["plan"],
+                "sampling_mpc(hypotheses=4)": ["handover"],
+                "sampling_mpc(hypotheses=1)": ["handover"],
                 "pd": ["straight"],
             },
         }
     )
     assert arms(exp) == [
-        ("sampling_mpc(hypotheses=4)/plan", "sampling_mpc"),
-        ("sampling_mpc(hypotheses=1)/plan", "sampling_mpc"),
+        ("sampling_mpc(hypotheses=4)/handover", "sampling_mpc"),
+        ("sampling_mpc(hypotheses=1)/handover", "sampling_mpc"),
         ("pd/straight", "pd"),
     ]
 

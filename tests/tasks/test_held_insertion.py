@@ -53,8 +53,8 @@ def test_the_task_family_is_chosen_by_name() -> None:
     [
         (
             ["task.strategy=wiggle"],
-            "task.strategy: unknown strategy 'wiggle'; known: align, force, locate, plan, probe, spiral, "
-            "straight, tilt",
+            "task.strategy: unknown strategy 'wiggle'; known: align, force, handover, locate, plan, probe, "
+            "spiral, straight, tilt",
         ),
         (["task.lateral_error=-0.001"], "task.lateral_error must be >= 0, got -0.001"),
         (["task.tilt_error=0.3"], "task.tilt_error must be below 0.2 rad, got 0.3"),
@@ -118,6 +118,36 @@ def test_position_noise_moves_the_observed_hole() -> None:
     shift = loops[1].observed_hole - loops[0].observed_hole  # type: ignore[attr-defined]
     np.testing.assert_allclose(shift, d.noise, atol=1e-12)
     assert 0.0 < float(np.hypot(*shift)) < 0.005
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_start_over_the_observed_hole_tells_nothing_of_the_true_one(seed: int) -> None:
+    """With ``start_over_observed`` the believed lower end starts over the camera's hole, and the
+    true end is the grasp's offset off that, not off the true hole; the task's belief starts
+    there, with the cell's spreads."""
+    sets = [
+        f"seed={seed}",
+        "task.lateral_error=0.002",
+        "task.position_noise=0.001",
+        "task.start_over_observed=true",
+    ]
+    loop = build_loop(config(*sets))
+    loop.reset(np.random.default_rng(seed))
+    task: Any = loop.task
+    from peg_ctrl.tasks.base import Observation
+
+    task.start(Observation(0.0, loop.state(), loop.peg))
+    believed = task.believed_bottom(Observation(0.0, loop.state(), loop.peg))
+    np.testing.assert_allclose(believed[:2], task.observed_hole, atol=1e-4)  # the jaw moves it by microns
+    true_end = loop.peg.bottom_world[:2]
+    assert float(np.hypot(*(true_end - task.observed_hole))) == pytest.approx(0.002, abs=5e-5)
+    d = task.disturbance
+    assert float(np.hypot(*d.noise)) > 1e-4  # the camera is off, so the two starts differ
+    b = task.knowledge
+    np.testing.assert_allclose([b.value("hole_x"), b.value("hole_y")], task.observed_hole)
+    assert b.sigma("hole_x") == pytest.approx(0.001) and b.sigma("face_z") == pytest.approx(1e-6)
+    with pytest.raises(ConfigError, match="task.start_over_observed: expected true or false, got 1"):
+        config("task.start_over_observed=1")
 
 
 @pytest.mark.parametrize("seed", [0, 4])

@@ -21,6 +21,7 @@ from peg_ctrl.tasks.strategies.base import (
     TaskDisturbance,
 )
 from peg_ctrl.tasks.strategies.force import ForceConfig, ForceStrategy
+from peg_ctrl.tasks.strategies.handover import HandoverConfig, HandoverStrategy
 from peg_ctrl.tasks.strategies.locate import LocateConfig, LocateStrategy
 from peg_ctrl.tasks.strategies.plan import PlanConfig, PlanStrategy
 from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
@@ -40,6 +41,8 @@ __all__ = [
     "AlignStrategy",
     "ForceConfig",
     "ForceStrategy",
+    "HandoverConfig",
+    "HandoverStrategy",
     "LocateConfig",
     "LocateStrategy",
     "PlanConfig",
@@ -69,6 +72,7 @@ STRATEGIES: dict[str, type[StrategyConfig]] = {
         ProbeConfig,
         LocateConfig,
         PlanConfig,
+        HandoverConfig,
     )
 }
 

@@ -28,6 +28,7 @@ from peg_ctrl.sim.scene import SceneConfig
 from peg_ctrl.sim.sensing import Detector, WristSensor
 from peg_ctrl.sim.state import ControlState
 from peg_ctrl.tasks.base import Observation
+from peg_ctrl.tasks.belief import TaskBelief
 from peg_ctrl.tasks.phases import Motion, PhaseMachine, PhaseSpec
 from peg_ctrl.tasks.strategies.motions import Pressing
 
@@ -91,12 +92,21 @@ class HeldInsertion(Protocol):
     drawing_sides: _Vec
     z_face: float
     machine: PhaseMachine
+    knowledge: TaskBelief  # the task's belief over what the cell leaves open (peg_ctrl.tasks.belief)
+    knowledge_across: _Vec  # its frame: the direction across the pads (world x, y) at the start
+    knowledge_quat: _Vec  # ... and the hand's orientation then
     plan_depth: float | None  # set: the strategy hands over to a planning controller (Belief.plan_depth)
 
     contact: Detector
 
     @property
     def wrist(self) -> WristSensor: ...
+
+    @property
+    def pose_repeatability(self) -> float: ...
+
+    @property
+    def drawing_tolerance(self) -> float: ...
 
     @property
     def speed_noise(self) -> float: ...
@@ -196,9 +206,14 @@ class Strategy:
         """The strategy's rows of the phase table (``settle`` is the task's)."""
         raise NotImplementedError(f"{type(self).__name__} has no phase table")
 
+    def motion_over(self, obs: Observation) -> bool:
+        """Whether the running phase's motion has played out (a strategy that runs phases of
+        its own inside one of the task's, ``plan``, answers for its own)."""
+        return self.task.machine.motion_over(obs.t)
+
     def _motion_done(self, obs: Observation) -> str | None:
         """A guard: ``ok`` once the phase's motion has played out."""
-        return "ok" if self.task.machine.motion_over(obs.t) else None
+        return "ok" if self.motion_over(obs) else None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -55,6 +55,7 @@ from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import Motion, PhaseSpec, Timeout
 from peg_ctrl.tasks.strategies.base import HeldInsertion, TaskDisturbance
 from peg_ctrl.tasks.strategies.probe import ProbeConfig, ProbeStrategy
+from peg_ctrl.tasks.strategies.skills.models import SkillNoise
 from peg_ctrl.tasks.strategies.skills.side_touch import (
     SideTouches,
     locate_across,
@@ -136,7 +137,10 @@ class LocateStrategy(ProbeStrategy):
         )
         budget = Timeout(c.side_time, True)
         table["sides"] = PhaseSpec(self._enter_sides, self._sides_done, "datum", budget, tick=self._side)
-        return {name: table[name] for name in c.phases}
+        return {name: table[name] for name in LocateConfig.phases}
+
+    def noise(self) -> SkillNoise:
+        return dataclasses.replace(super().noise(), side_turn=self.cfg.yaw)
 
     def hole_prior(self) -> tuple[_Vec, float, float]:
         """The located hole with the tight prior; the observed one if a side was not found."""
@@ -172,6 +176,9 @@ class LocateStrategy(ProbeStrategy):
             return None
         if self.sides.delta is not None:
             t = self.task
+            assert self.sides.hole is not None
+            across = float(np.dot(self.sides.delta, t.knowledge_across))
+            self.observe("sides", [*self.sides.hole, across], obs)
             shift = rotate_inv(self.sides.quat, np.array([*self.sides.delta, 0.0]))
             t.revise_axis(t.up_body, obs.gripper, grasp_shift=shift)
             self.end_known = True

@@ -78,6 +78,7 @@ from peg_ctrl.tasks.strategies.skills import (
     RockCalibration,
     upright,
 )
+from peg_ctrl.tasks.strategies.skills.models import SkillNoise, reading_of
 
 __all__ = ["ProbeConfig", "ProbeStrategy"]
 
@@ -218,6 +219,29 @@ class ProbeStrategy(Strategy):
         t = self.task
         return t.grasp_body - t.grip_length * t.up_body
 
+    def noise(self) -> SkillNoise:
+        """What the skills' readings' noise is made of (:mod:`~peg_ctrl.tasks.strategies.skills.models`)."""
+        t = self.task
+        return SkillNoise(
+            position=t.pose_repeatability,
+            drawing=t.drawing_tolerance,
+            clearance=t.hole_radius - t.radius,
+            radius=t.radius,
+            rock_angle=self.cfg.rock_angle,
+            side_turn=0.0,
+        )
+
+    def observe(self, skill: str, value: _Vec | list[float], obs: Observation) -> None:
+        """``skill``'s reading into the task's belief, through its measurement model."""
+        t = self.task
+        reading = reading_of(skill, t.knowledge, self.noise(), t.knowledge_across)
+        t.knowledge.update(reading.with_value(value), obs.t)
+
+    def observe_rock(self, obs: Observation) -> None:
+        """The rock's reading into the task's belief (the tilt and the face's height)."""
+        assert self.rock is not None and self.rock.tilt is not None
+        self.observe("rock", [self.rock.tilt, self.rock.z_face], obs)
+
     def tip_waypoint(self, tip: _Vec, q: _Vec) -> Waypoint:
         return Waypoint.of(self.task.pinch_for(tip, q), q, 0.0)
 
@@ -290,6 +314,7 @@ class ProbeStrategy(Strategy):
         t = self.task
         assert self.rock is not None
         if self.rock.tilt is not None:
+            self.observe_rock(obs)
             # An end located by touch stays where it was found: the grasp point moves instead.
             shift = t.grip_length * (self.rock.axis_body - t.up_body) if self.end_known else None
             t.revise_axis(self.rock.axis_body, obs.gripper, grasp_shift=shift)
@@ -317,28 +342,23 @@ class ProbeStrategy(Strategy):
         """Once lifted, land; the landing's height is the face's."""
         t = self.task
         if self.landing is None:
-            if not t.machine.motion_over(obs.t):
+            if not self.motion_over(obs):
                 return None
             self.landing = self.land(obs, PRESS_AXES)
             self._hold.target = self.landing.target
             return None
         if not self.landing.update(obs):
             return None
+        self.observe("face", [self.landing.z], obs)
         t.z_face = self.landing.z
         return "landed"
 
     # -- transfer and probe ----------------------------------------------------------------------------
     def _enter_transfer(self, obs: Observation) -> Motion:
         """Lift, over the belief's first landing point, down to the hover height."""
-        t, c, a = self.task, self.cfg, self.task.scene.assets
+        t, c = self.task, self.cfg
         q = np.asarray(t.goal.quat_world)
-        centre, sigma, radius = self.hole_prior()
-        self.belief = HoleBelief(
-            (float(centre[0]), float(centre[1])),
-            radius=radius,
-            sigma=sigma,
-            capture=a.clearance + a.chamfer - c.drop_min,
-        )
+        self.belief = self.search_belief()
         first = self.belief.best_probe()
         here = Waypoint.of(obs.gripper.p_world, q, 0.0)
         up = t.believed_bottom(obs) + np.array([0.0, 0.0, 0.0008])
@@ -355,6 +375,18 @@ class ProbeStrategy(Strategy):
         )
         t.goal = self.tip_waypoint(hover, q)
         return TrajectorySequence(parts)
+
+    def capture(self) -> float:
+        """How far from the axis a landing is caught by the chamfer, as the search sees it [m]."""
+        a = self.task.scene.assets
+        return a.clearance + a.chamfer - self.cfg.drop_min
+
+    def search_belief(self) -> HoleBelief:
+        """The search's belief over where the end must go, from :meth:`hole_prior`."""
+        centre, sigma, radius = self.hole_prior()
+        return HoleBelief(
+            (float(centre[0]), float(centre[1])), radius=radius, sigma=sigma, capture=self.capture()
+        )
 
     def hole_prior(self) -> tuple[_Vec, float, float]:
         """The search's prior over the hole: its centre (x, y) [m], standard deviation [m] and
@@ -378,6 +410,7 @@ class ProbeStrategy(Strategy):
     def _after_probe(self, obs: Observation) -> str:
         if not self.task.in_bore(obs):
             return DONE
+        self.observe("mouth", self.task.believed_bottom(obs)[:2], obs)
         return "centre" if self.cfg.centre_in_mouth else "insert"
 
     # -- centre in the bore's mouth -----------------------------------------------------------------------
@@ -392,7 +425,10 @@ class ProbeStrategy(Strategy):
 
     def _centred(self, obs: Observation) -> str | None:
         assert self.centring is not None
-        return "centred" if self.centring.centre is not None else None
+        if self.centring.centre is None:
+            return None
+        self.observe("centre", self.centring.centre, obs)
+        return "centred"
 
     # -- insert and hold ----------------------------------------------------------------------------
     def _enter_insert(self, obs: Observation) -> Motion:
@@ -416,8 +452,7 @@ class ProbeStrategy(Strategy):
         return SLIDE_AXES if self.cfg.insert_free else NO_AXES
 
     def _seated(self, obs: Observation) -> str | None:
-        t = self.task
-        return "seated" if t.machine.motion_over(obs.t) and t.seated_detected(obs) else None
+        return "seated" if self.motion_over(obs) and self.task.seated_detected(obs) else None
 
     def _enter_hold(self, obs: Observation) -> Motion:
         s = obs.gripper

@@ -204,19 +204,28 @@ def _wxyz(r: Rotation) -> NDArray[np.float64]:
 
 
 def _calibration(
-    tilt: float, z_face: float, noise: NDArray[np.float64], *, offset: float = 0.0, end_known: bool = False
+    tilt: float,
+    z_face: float,
+    noise: NDArray[np.float64],
+    *,
+    offset: float = 0.0,
+    end_known: bool = False,
+    turns: tuple[float, ...] = (1.0, -1.0),
+    free_end: bool = False,
 ) -> RockCalibration:
     """The calibration after its three landings, the touch and at +/- ``rock_angle`` about the
     pads' normal (gripper x), for a peg tilted by ``tilt`` [rad] about it in the hand and held
     ``offset`` [m] along the pads' plane, across its axis, from where the task believes: each hand
     pose put the lowest point of the peg's end on the face at ``z_face`` [m] (plus ``noise`` (3,)).
-    ``end_known``: the task's belief of the end is the true end (located by touch)."""
+    ``end_known``: the task's belief of the end is the true end (located by touch); ``turns``: the
+    turned landings, in ``rock_angle``; ``free_end``: the fit looks for the end's offset across
+    the pads too (up to 6 mm either way)."""
     up_true = Rotation.from_rotvec(tilt * np.array([1.0, 0.0, 0.0])).apply(UP_BODY)
     across = np.cross(UP_BODY, [1.0, 0.0, 0.0])
     grasp_true = GRASP_BODY + offset * across
     x_world = _Q0.apply([1.0, 0.0, 0.0])
     landings = []
-    for k, angle in enumerate((0.0, CFG.rock_angle, -CFG.rock_angle)):
+    for k, angle in enumerate((0.0, *(t * CFG.rock_angle for t in turns))):
         r = Rotation.from_rotvec(angle * x_world) * _Q0
         tip = r.apply(grasp_true - GRIP_LENGTH * up_true)  # the true lower end's centre, from the pinch
         axis = r.apply(up_true)
@@ -230,7 +239,36 @@ def _calibration(
     cal.end_known = end_known
     cal.landings = landings
     cal._thetas = np.linspace(-CFG.max_tilt, CFG.max_tilt, 321)  # as __init__ makes it
+    cal._ends = np.linspace(-0.006, 0.006, 61) if free_end else np.zeros(1)
+    cal._end_body = across / np.linalg.norm(across) if free_end else np.zeros(3)
+    cal.end = 0.0
     return cal
+
+
+@pytest.mark.parametrize("tilt_deg", [2.0, -2.0, 0.0])
+@pytest.mark.parametrize("offset", [0.003, -0.001])
+@pytest.mark.parametrize("swing_in_end", [False, True])
+def test_the_rock_with_a_free_end_finds_the_tilt_and_where_the_end_is(
+    tilt_deg: float, offset: float, swing_in_end: bool
+) -> None:
+    """Five landings (the touch, +/- rock_angle, +/- 1.6 rock_angle): the offset that the
+    three-landing fit reads as a tilt is fitted with it, the tilt to 0.05 degrees and the offset
+    to the grid's 0.2 mm step. Where the tilt's model turns the end about the pads (``end_known``
+    false) the offset is the grasp's; where it does not (``plan``: the belief's offset of the end
+    holds the tilt's swing too) it is the grasp's and the swing, ``grip_length`` per radian, and
+    the swing's rise, ``grip_length (1 - cos tilt)``, goes into the face's height."""
+    tilt = math.radians(tilt_deg)
+    cal = _calibration(tilt, 0.05, np.zeros(5), offset=offset, turns=(1.0, -1.0, 1.6, -1.6), free_end=True)
+    cal.end_known = swing_in_end
+    cal._fit()
+    up_true = Rotation.from_rotvec(tilt * np.array([1.0, 0.0, 0.0])).apply(UP_BODY)
+    across = np.cross(UP_BODY, [1.0, 0.0, 0.0])
+    swing = GRIP_LENGTH * (UP_BODY - up_true) if swing_in_end else np.zeros(3)
+    end = float((offset * across + swing) @ across)
+    rise = GRIP_LENGTH * (1.0 - math.cos(tilt)) if swing_in_end else 0.0
+    assert cal.tilt is not None and math.degrees(cal.tilt) == pytest.approx(tilt_deg, abs=0.05)
+    assert cal.end == pytest.approx(end, abs=1e-4)
+    assert cal.z_face == pytest.approx(0.05 - rise, abs=5e-6)
 
 
 @pytest.mark.parametrize("tilt_deg", [2.0, -1.3, 3.71, 0.0])

@@ -73,7 +73,17 @@ def plunge() -> object:
 
 
 def test_the_built_in_strategies_are_registered_by_name() -> None:
-    assert list(STRATEGIES) == ["straight", "force", "spiral", "tilt", "align", "probe", "locate", "plan"]
+    assert list(STRATEGIES) == [
+        "straight",
+        "force",
+        "spiral",
+        "tilt",
+        "align",
+        "probe",
+        "locate",
+        "plan",
+        "handover",
+    ]
     for name, cls in STRATEGIES.items():
         assert cls.name == name and cls.phases and "settle" not in cls.phases
         assert StrategyConfig.select(name) == cls()

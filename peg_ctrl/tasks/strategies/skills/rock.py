@@ -8,7 +8,7 @@ import numpy as np
 
 from peg_ctrl.commands import GripperTarget
 from peg_ctrl.planners.base import Waypoint
-from peg_ctrl.sim.rotations import quat_mul, rotate
+from peg_ctrl.sim.rotations import quat_mul, rotate, rotate_inv
 from peg_ctrl.tasks.base import Observation
 from peg_ctrl.tasks.phases import TrajectorySequence
 from peg_ctrl.tasks.strategies.motions import about
@@ -33,26 +33,55 @@ class RockCalibration:
     pads' normal through the believed lower end) fix ``theta`` and the face's height. Each
     landing starts from just above the highest height the touch allows for it.
 
+    With ``free_end`` (a unit direction, world x, y, at the orientation ``frame``) the end's
+    offset along it from the believed one is fitted too (up to ``end_range`` [m] either way): an
+    end off by ``e`` rises or falls by ``e sin(angle)`` as the hand turns, which a fit that
+    takes the end as known reads as a tilt (``α/R`` of it: 5 mrad a millimetre here). The rim
+    drops on the side the tilt leans to and the offset lifts one side and lowers the other, so
+    the landings tell the two apart; ``angles`` (default ``+/- rock_angle``) gives the turned
+    landings. With the strategy's ``end_known`` (``plan``) the offset holds the tilt's swing of the
+    end across the pads as well; the swing's rise, ``grip_length (1 - cos tilt)`` (37 µm at 2°),
+    is not modelled and goes into the fitted face's height.
+
     Attributes:
-        tilt: the fitted ``theta`` [rad], None until the third landing; ``axis_body``: the
+        tilt: the fitted ``theta`` [rad], None until the last landing; ``axis_body``: the
             peg's axis in the gripper frame; ``z_face``: the face's height the fit gives [m];
-            ``q0``: the hand's orientation at the touch.
+            ``end``: the end's fitted offset along ``free_end`` [m] (0 without it); ``q0``: the
+            hand's orientation at the touch.
     """
 
     duration = 0.0
     #: The believed lower end is the true one (found by touch): the fit turns the axis about it.
     end_known = False
 
-    def __init__(self, strategy: ProbeHost, touch: Landing, obs: Observation) -> None:
+    def __init__(
+        self,
+        strategy: ProbeHost,
+        touch: Landing,
+        obs: Observation,
+        *,
+        angles: list[float] | None = None,
+        free_end: _Vec | None = None,
+        frame: _Vec | None = None,
+        end_range: float = 0.0,
+    ) -> None:
         self.strategy, self.task, self.cfg = strategy, strategy.task, strategy.cfg
         self.end_known = strategy.end_known
         self.q0 = touch.quat_world.copy()
         self.landings = [touch]
         self.tilt: float | None = None
+        self.end = 0.0
         self.axis_body = self.task.up_body
         self.z_face = self.task.block_top
-        self._angles = [self.cfg.rock_angle, -self.cfg.rock_angle]
+        self._angles = list(angles) if angles else [self.cfg.rock_angle, -self.cfg.rock_angle]
         self._thetas = np.linspace(-self.cfg.max_tilt, self.cfg.max_tilt, 321)
+        # The end's offsets the fit weighs (gripper frame, one per grid value), none without free_end.
+        self._ends = np.linspace(-end_range, end_range, 61) if free_end is not None else np.zeros(1)
+        if free_end is not None:
+            q = np.asarray(frame if frame is not None else self.q0, dtype=float)
+            self._end_body = rotate_inv(q, np.array([free_end[0], free_end[1], 0.0]))
+        else:
+            self._end_body = np.zeros(3)
         self._next(obs)
 
     def sample(self, t: float) -> GripperTarget:
@@ -70,15 +99,16 @@ class RockCalibration:
         return offset, t.radius * math.sqrt(max(0.0, 1.0 - a[2] * a[2]))
 
     def _faces(self, landing: Landing) -> _Vec:
-        """The face's height each tilt of the grid implies for ``landing`` [m]."""
-        tip = landing.p_world + rotate(
-            landing.quat_world, self.task.grasp_body - self.task.grip_length * self.task.up_body
-        )
+        """The face's height each (tilt, end offset) of the grid implies for ``landing`` [m],
+        flattened tilt-major."""
+        q = landing.quat_world
+        tip = landing.p_world + rotate(q, self.task.grasp_body - self.task.grip_length * self.task.up_body)
         out = np.empty(len(self._thetas))
         for k, theta in enumerate(self._thetas):
-            offset, rim = self._model(landing.quat_world, float(theta))
+            offset, rim = self._model(q, float(theta))
             out[k] = tip[2] + offset[2] - rim
-        return out
+        lift = rotate(q, self._end_body)[2] * self._ends  # the end's offset, turned with the hand
+        return (out[:, None] + lift[None, :]).ravel()
 
     def _next(self, obs: Observation) -> None:
         """Lift, turn to the next angle about the believed lower end, down to just above the
@@ -92,11 +122,14 @@ class RockCalibration:
         faces = np.array([self._faces(landing) for landing in self.landings])
         allowed = np.all(np.abs(faces - (t.block_top - 0.5 * _FACE_TOLERANCE)) <= _FACE_TOLERANCE, axis=0)
         allowed &= np.ptp(faces, axis=0) <= 0.5 * _FACE_TOLERANCE
-        pick = allowed if allowed.any() else np.ones(len(self._thetas), dtype=bool)
-        candidates = zip(self._thetas[pick], faces[0, pick], strict=True)
+        pick = allowed if allowed.any() else np.ones(faces.shape[1], dtype=bool)
+        thetas = np.repeat(self._thetas, len(self._ends))
+        ends = np.tile(self._ends, len(self._thetas))
+        lift = rotate(q, self._end_body)[2]
+        rims = {float(theta): self._model(q, float(theta)) for theta in np.unique(thetas[pick])}
         highest = max(
-            z_face + self._model(q, float(theta))[1] - self._model(q, float(theta))[0][2]
-            for theta, z_face in candidates
+            z_face + rims[float(theta)][1] - rims[float(theta)][0][2] - lift * end
+            for theta, end, z_face in zip(thetas[pick], ends[pick], faces[0, pick], strict=True)
         )
         # Up clear of the face first (by as much as the turn can lower the end's rim), turn
         # about the pinch point (the end moves a few millimetres over the datum's face, which has
@@ -136,9 +169,14 @@ class RockCalibration:
         self._fit()
 
     def _fit(self) -> None:
-        """Least squares over the tilt grid (the face's height the same for every landing),
-        refined by a parabola through the best three."""
+        """Least squares over the grid (the face's height the same for every landing), the tilt
+        refined by a parabola through the best three at the best end offset."""
         faces = np.array([self._faces(landing) for landing in self.landings])
+        n_end = len(self._ends)
+        best = int(np.argmin(faces.var(axis=0)))
+        j = best % n_end
+        self.end = float(self._ends[j])
+        faces = faces.reshape(len(self.landings), len(self._thetas), n_end)[:, :, j]
         cost = faces.var(axis=0)
         k = int(np.clip(np.argmin(cost), 1, len(cost) - 2))
         c0, c1, c2 = cost[k - 1 : k + 2]

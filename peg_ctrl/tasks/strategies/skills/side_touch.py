@@ -86,9 +86,15 @@ class SideTouches:
 
     duration = 0.0
 
-    def __init__(self, strategy: LocateStrategy, obs: Observation) -> None:
+    def __init__(
+        self, strategy: LocateStrategy, obs: Observation, gaps: tuple[float, float] | None = None
+    ) -> None:
         self.strategy, self.task, self.cfg = strategy, strategy.task, strategy.cfg
         t, c = self.task, self.cfg
+        # How far beyond the side the first approach starts, and the second side's beyond where
+        # the end will meet it (by default the config's side_gap and camera_gap; a belief of
+        # where the sides are can tell less).
+        self._gaps = gaps if gaps is not None else (c.side_gap, c.camera_gap)
         self.quat = np.asarray(t.goal.quat_world, dtype=float)
         self._turned = quat_mul(yaw_quat(c.yaw), self.quat)
         # Horizontal in the pads' plane, square to their closing direction, at yaw 0 (world x, y):
@@ -166,15 +172,16 @@ class SideTouches:
         the -y side takes the pair, from its one touch against the side the camera and the
         drawing put there (:meth:`_offset_along`)."""
         c = self.cfg
+        side_gap, camera_gap = self._gaps
         start = np.array([*self._along, self._z_low])
-        start[side] = self._side_at[side] - self.task.radius - c.side_gap
+        start[side] = self._side_at[side] - self.task.radius - side_gap
         if side == 1 and c.side_touches == 3:
             d_y = self._offset_along(len(self.touched))
-            start[1] = self._side_at[1] - d_y - self.task.radius - c.camera_gap
+            start[1] = self._side_at[1] - d_y - self.task.radius - camera_gap
         elif side == 1 and len(self.touched) >= 2:
             # (1 - cos yaw) d_x + sin(yaw) d_y: d_x's share is within a millimetre of d_y
             d_y = (self.touched[1][0] - self.touched[0][0]) / math.sin(c.yaw)
-            start[1] = self._side_at[1] - d_y - self.task.radius - c.camera_gap
+            start[1] = self._side_at[1] - d_y - self.task.radius - camera_gap
         return start
 
     def _plan(self, tips: list[_Vec], quats: list[_Vec]) -> Motion:
@@ -224,7 +231,7 @@ class SideTouches:
         side, q = self._leg()
         tip = self.task.believed_bottom(obs)
         goal = tip.copy()
-        goal[side] += 2.0 * (c.camera_gap if side == 1 else c.side_gap)
+        goal[side] += 2.0 * (self._gaps[1] if side == 1 else self._gaps[0])
         limits = dataclasses.replace(self.task.limits, v_lin=c.touch_speed, a_lin=c.move_accel)
         self._trajectory = self.task.planner.plan(st.tip_waypoint(tip, q), st.tip_waypoint(goal, q), limits)
         self._state, self._t0, self._at_speed, self._moving_since = "approach", obs.t, False, None
