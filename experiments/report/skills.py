@@ -52,30 +52,28 @@ def _cell(row: dict[str, Any], keys: list[str]) -> str:
     return ", ".join(f"{k.split('.')[-1]} {row[k]}" for k in keys)
 
 
-def skill_section(out_dir: Path, rows: list[dict[str, Any]], grid_keys: list[str]) -> list[str]:
-    """The planner's choices (from the episodes' summary.json ``skills``); [] when no episode
-    has them."""
-    table: dict[tuple[str, str], dict[str, Any]] = {}
-    decisions: dict[str, list[float]] = collections.defaultdict(list)
-    share: dict[str, list[float]] = collections.defaultdict(list)  # the planner's compute / wall time
-    touches: dict[str, list[int]] = collections.defaultdict(list)
-    for row in rows:
-        if not row.get("log_path"):
-            continue
+class _Choices:
+    """What the section reads from a run's episodes, per arm (and per cell for the choices)."""
+
+    def __init__(self) -> None:
+        self.table: dict[tuple[str, str], dict[str, Any]] = {}
+        self.decisions: dict[str, list[float]] = collections.defaultdict(list)
+        self.share: dict[str, list[float]] = collections.defaultdict(list)  # the planner's compute / wall
+        self.touches: dict[str, list[int]] = collections.defaultdict(list)
+
+    def add(self, out_dir: Path, row: dict[str, Any], grid_keys: list[str]) -> None:
         folder = episode_dir(out_dir, row["log_path"])
-        if (folder / "forces.npz").is_file():
-            touches[arm_of(row)].append(touch_count(folder / "forces.npz"))
-        path = folder / "summary.json"
-        if not path.is_file():
-            continue
-        skills = json.loads(path.read_text()).get("skills") or []
-        if not skills:
-            continue
         arm = arm_of(row)
+        if (folder / "forces.npz").is_file():
+            self.touches[arm].append(touch_count(folder / "forces.npz"))
+        path = folder / "summary.json"
+        skills = (json.loads(path.read_text()).get("skills") or []) if path.is_file() else []
+        if not skills:
+            return
         wall = float(row.get("wall_time_s") or 0.0)
         if wall > 0:
-            share[arm].append(sum(float(s.get("decision_s", 0.0)) for s in skills) / wall)
-        entry = table.setdefault(
+            self.share[arm].append(sum(float(s.get("decision_s", 0.0)) for s in skills) / wall)
+        entry = self.table.setdefault(
             (arm, _cell(row, grid_keys)),
             {"n": 0, "ok": 0, "orders": collections.Counter(), "count": [], "time": collections.Counter()},
         )
@@ -86,52 +84,70 @@ def skill_section(out_dir: Path, rows: list[dict[str, Any]], grid_keys: list[str
         end = float(row.get("sim_time_s") or 0.0)
         for s in skills:
             entry["time"][s["skill"]] += float(s.get("t_end", end)) - float(s["t_start"])
-            decisions[arm].append(float(s.get("decision_s", 0.0)))
-    if not table:
+            self.decisions[arm].append(float(s.get("decision_s", 0.0)))
+
+    def choice_lines(self) -> list[str]:
+        lines = [
+            "## The skills the planner chose",
+            "",
+            "Per arm and cell: the orders of skills its episodes played (how many episodes each), the "
+            "median number of skills, and each skill's share of the time the skills took.",
+            "",
+            "| arm | cell | episodes (seated) | orders | skills (median) | share of the time |",
+            "|---|---|---|---|---|---|",
+        ]
+        for (arm, cell), e in sorted(self.table.items()):
+            total = sum(e["time"].values()) or 1.0
+            orders = "; ".join(f"{o} ({k})" for o, k in e["orders"].most_common())
+            shares = ", ".join(f"{s} {100.0 * v / total:.0f} %" for s, v in e["time"].most_common())
+            lines.append(
+                f"| {arm} | {cell} | {e['n']} ({e['ok']}) | {orders} | {np.median(e['count']):g} | {shares} |"
+            )
+        return lines
+
+    def compute_lines(self) -> list[str]:
+        lines = [
+            "",
+            "The planner's own compute per decision (wall clock, this machine), and its share of each "
+            "episode's wall time:",
+            "",
+            "| arm | decisions | median [ms] | p99 [ms] | largest [ms] | of wall time (median, largest) |",
+            "|---|---|---|---|---|---|",
+        ]
+        for arm, times in sorted(self.decisions.items()):
+            ms = 1e3 * np.asarray(times)
+            part = 100.0 * np.asarray(self.share[arm] or [0.0])
+            lines.append(
+                f"| {arm} | {len(ms)} | {np.median(ms):.2f} | {np.percentile(ms, 99):.2f} | {ms.max():.2f} "
+                f"| {np.median(part):.3f} %, {part.max():.3f} % |"
+            )
+        return lines
+
+    def touch_lines(self) -> list[str]:
+        lines = [
+            "",
+            f"Touches per episode, every arm: the peg's contacts with the block, each begun after at "
+            f"least {1e3 * TOUCH_GAP:.0f} ms clear of it (from the force traces).",
+            "",
+            "| arm | episodes | touches: median | 5th-95th percentile |",
+            "|---|---|---|---|",
+        ]
+        for arm, counts in sorted(self.touches.items()):
+            lo, hi = np.percentile(counts, [5, 95])
+            lines.append(f"| {arm} | {len(counts)} | {np.median(counts):g} | {lo:g}-{hi:g} |")
+        return lines
+
+
+def skill_section(out_dir: Path, rows: list[dict[str, Any]], grid_keys: list[str]) -> list[str]:
+    """The planner's choices (from the episodes' summary.json ``skills``), its compute, and every
+    arm's touches; [] when no episode has skills."""
+    choices = _Choices()
+    for row in rows:
+        if row.get("log_path"):
+            choices.add(out_dir, row, grid_keys)
+    if not choices.table:
         return []
-    lines = [
-        "## The skills the planner chose",
-        "",
-        "Per arm and cell: the orders of skills its episodes played (how many episodes each), the "
-        "median number of skills, and each skill's share of the time the skills took.",
-        "",
-        "| arm | cell | episodes (seated) | orders | skills (median) | share of the time |",
-        "|---|---|---|---|---|---|",
-    ]
-    for (arm, cell), e in sorted(table.items()):
-        total = sum(e["time"].values()) or 1.0
-        orders = "; ".join(f"{o} ({k})" for o, k in e["orders"].most_common())
-        shares = ", ".join(f"{s} {100.0 * v / total:.0f} %" for s, v in e["time"].most_common())
-        lines.append(
-            f"| {arm} | {cell} | {e['n']} ({e['ok']}) | {orders} | {np.median(e['count']):g} | {shares} |"
-        )
-    lines += [
-        "",
-        "The planner's own compute per decision (wall clock, this machine), and its share of each "
-        "episode's wall time:",
-        "",
-        "| arm | decisions | median [ms] | p99 [ms] | largest [ms] | share of wall time (median, largest) |",
-        "|---|---|---|---|---|---|",
-    ]
-    for arm, times in sorted(decisions.items()):
-        ms = 1e3 * np.asarray(times)
-        part = 100.0 * np.asarray(share[arm] or [0.0])
-        lines.append(
-            f"| {arm} | {len(ms)} | {np.median(ms):.2f} | {np.percentile(ms, 99):.2f} | {ms.max():.2f} "
-            f"| {np.median(part):.3f} %, {part.max():.3f} % |"
-        )
-    lines += [
-        "",
-        f"Touches per episode, every arm: the peg's contacts with the block, each begun after at least "
-        f"{1e3 * TOUCH_GAP:.0f} ms clear of it (from the force traces).",
-        "",
-        "| arm | episodes | touches: median | 5th-95th percentile |",
-        "|---|---|---|---|",
-    ]
-    for arm, counts in sorted(touches.items()):
-        lo, hi = np.percentile(counts, [5, 95])
-        lines.append(f"| {arm} | {len(counts)} | {np.median(counts):g} | {lo:g}-{hi:g} |")
-    return [*lines, ""]
+    return [*choices.choice_lines(), *choices.compute_lines(), *choices.touch_lines(), ""]
 
 
 def belief_figure(summary: dict[str, Any], out: Path) -> Path:

@@ -188,6 +188,18 @@ class BeliefTask(Task, Protocol):
         """The hole and the grasp as the task believes them (a new object when they change)."""
         ...
 
+    @property
+    def readings(self) -> list[dict[str, Any]]:
+        """What the task's belief took in so far, reading by reading: the time, the skill, the
+        information [bits] and the belief's spreads after it (peg_ctrl.tasks.belief)."""
+        ...
+
+    @property
+    def skill_log(self) -> list[dict[str, Any]]:
+        """The skills its strategy chose and played, with its decisions (a planning strategy's;
+        empty for a script)."""
+        ...
+
 
 _ABSENT = object()
 

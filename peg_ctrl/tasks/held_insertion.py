@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
@@ -209,6 +209,7 @@ class HeldInsertionTask(PlannedMoves):
         self._belief: Belief | None = None
         self._belief_key: tuple[float, ...] = ()
         self.plan_depth: float | None = None  # set when the strategy hands over to a planner
+        self._reset_knowledge(np.array([1.0, 0.0, 0.0, 0.0]))  # the task's belief (start() sets its frame)
         self.strategy: Strategy = config.strategy.build(self)
         self.machine = PhaseMachine(self.phase_table())
 
@@ -277,6 +278,14 @@ class HeldInsertionTask(PlannedMoves):
                 plan_depth=self.plan_depth,
             )
         return self._belief
+
+    @property
+    def readings(self) -> list[dict[str, Any]]:
+        return list(self.knowledge.history)
+
+    @property
+    def skill_log(self) -> list[dict[str, Any]]:
+        return list(self.strategy.skill_log)
 
     @property
     def time_to_insert(self) -> float | None:

@@ -276,6 +276,8 @@ class TeleopSession:
             "plot_path": None,
             "video_path": None,
             "phases": [r.to_dict() for r in self.task.records],
+            "belief": [],  # a person decides: no task belief, no skills chosen
+            "skills": [],
             "attempts": self.attempt,
             "end": reason,
             "peg_radial_m": check.radial_m,

@@ -129,7 +129,8 @@ def test_run_writes_a_video(tmp_path: Path) -> None:
             "no shipped experiment has that name; shipped: clearance, contact, contact_hard, "
             "contact_hard_offgrid, contact_real, contact_real_descent, contact_real_friction5, "
             "contact_real_offgrid, contact_real_offgrid_friction5, contact_real_offgrid_orientation, "
-            "contact_real_orientation, guarded, plan, quick",
+            "contact_real_orientation, contact_real_plan, contact_real_plan_fixed, "
+            "contact_real_plan_offgrid, guarded, plan, quick",
         ),
         (["sweep", "quick", "--workers", "0"], "--workers must be >= 1, got 0"),
         (["sweep", "quick", "--dry-run", "--workers", "-1"], "--workers must be >= 1, got -1"),

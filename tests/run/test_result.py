@@ -93,6 +93,7 @@ def test_the_metadata_gives_units_kinds_and_summaries() -> None:
     ]
     assert WALL_CLOCK_FIELDS == (
         "wall_time_s",
+        "skills",  # the planner's decisions carry its compute time
         "control_time_p50_s",
         "control_time_p99_s",
         "solve_time_p50_s",

@@ -201,6 +201,8 @@ class Strategy:
     def __init__(self, task: HeldInsertion, config: Any) -> None:
         self.task = task
         self.cfg = config
+        #: The skills played, with the decisions that chose them (a planning strategy's: ``plan``).
+        self.skill_log: list[dict[str, Any]] = []
 
     def phase_table(self) -> dict[str, PhaseSpec]:
         """The strategy's rows of the phase table (``settle`` is the task's)."""

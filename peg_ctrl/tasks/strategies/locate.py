@@ -140,7 +140,7 @@ class LocateStrategy(ProbeStrategy):
         return {name: table[name] for name in LocateConfig.phases}
 
     def noise(self) -> SkillNoise:
-        return dataclasses.replace(super().noise(), side_turn=self.cfg.yaw)
+        return SkillNoise.of(self.task, self.cfg.rock_angle, self.cfg.yaw)
 
     def hole_prior(self) -> tuple[_Vec, float, float]:
         """The located hole with the tight prior; the observed one if a side was not found."""

@@ -128,7 +128,6 @@ class PlanStrategy(LocateStrategy):
         super().__init__(task, config)
         self.end_known = True  # the belief carries the end's offset: the rock turns about the believed end
         self.where = _Where()
-        self.skill_log: list[dict[str, Any]] = []
         self.inner: PhaseMachine | None = None
         self._skill = ""
         self._target: GripperTarget | None = None

@@ -21,32 +21,24 @@ Phases:
 - ``approach`` the datum, a point of the block's top face ``datum_offset`` beside the observed
   hole (along the diagonal towards -x, -y), the lower end ``touch_gap`` above it;
 - ``touch``: land on it (the first contact);
-- ``rock``: the tilt of the peg in the hand, from the pose alone (:class:`RockCalibration`):
-  two more landings on the datum with the hand turned by +/- ``rock_angle`` about the pads'
-  normal (the only axis the pads let the peg turn about); the three landing heights fix the
-  tilt and the face's height (a least-squares fit); the task revises its belief of the peg's
-  axis (:meth:`HeldInsertion.revise_axis`). No moment is read: about the tip, the sensor's
-  force noise times its 0.17 m lever swamps the moment a flat-pressing end makes;
+- ``rock``: the tilt of the peg in the hand from the pose alone, two more landings turned by
+  +/- ``rock_angle`` about the pads' normal (:class:`RockCalibration`); the task revises its
+  belief of the axis. No moment is read: the sensor's noise at its 0.17 m lever swamps it;
 - ``reference``: lift, land again on the datum: the face's height for the landings to come, at
   their own force;
 - ``transfer`` over the first landing point;
 - ``probe``: landings and bearing presses, as above, until the lower end is believed in the bore
   (a landing on the believed axis goes on down it);
-- ``centre``: the lower end, in the bore's mouth, pushed against its walls along +x, -x, +y,
-  -y in turn (the stops read from the pose); the bore's axis is midway between them. A push
-  that reverses the one before starts from the contact loop's command, still pressed into the
-  wall just found, unless ``centre_reanchor`` (then from where the hand is: without it the
-  hand can stand still at the old wall and be read there, docs/contact_real.md);
-- ``insert``: ``relax_time`` still on that axis, then a jerk-limited descent at
-  ``insert_speed`` to ``seat_margin`` below the seated depth, the pose tracked on every axis (a
-  peg centred and upright in its bore touches no wall; with the lateral forces free the contact
-  MPC's accommodation taps the walls, 60 N at friction 0.9: ``insert_free`` frees them anyway);
+- ``centre``: the lower end, in the bore's mouth, pushed against its walls (:class:`Centring`,
+  ``centre_reanchor``: docs/contact_real.md); the bore's axis is midway between them;
+- ``insert``: ``relax_time`` still on that axis, then down at ``insert_speed`` to ``seat_margin``
+  below the seated depth, the pose tracked (``insert_free`` frees the lateral forces: the contact
+  MPC's accommodation then taps the walls, 60 N at friction 0.9);
 - ``hold`` still once the seated detection fires (depth reached, the hand at rest within the
   noise of its speed sensing), pushing no more.
 
 The bearing press and the centring's pushes are at least twice what the task's contact detection
 needs to tell a push from the sensor's noise; a landing is not: its stop is read from the pose.
-
 The touches are skills of their own (:mod:`peg_ctrl.tasks.strategies.skills`): this plays them.
 """
 
@@ -78,7 +70,7 @@ from peg_ctrl.tasks.strategies.skills import (
     RockCalibration,
     upright,
 )
-from peg_ctrl.tasks.strategies.skills.models import SkillNoise, reading_of
+from peg_ctrl.tasks.strategies.skills.models import SkillNoise, observe
 
 __all__ = ["ProbeConfig", "ProbeStrategy"]
 
@@ -221,21 +213,11 @@ class ProbeStrategy(Strategy):
 
     def noise(self) -> SkillNoise:
         """What the skills' readings' noise is made of (:mod:`~peg_ctrl.tasks.strategies.skills.models`)."""
-        t = self.task
-        return SkillNoise(
-            position=t.pose_repeatability,
-            drawing=t.drawing_tolerance,
-            clearance=t.hole_radius - t.radius,
-            radius=t.radius,
-            rock_angle=self.cfg.rock_angle,
-            side_turn=0.0,
-        )
+        return SkillNoise.of(self.task, self.cfg.rock_angle)
 
     def observe(self, skill: str, value: _Vec | list[float], obs: Observation) -> None:
         """``skill``'s reading into the task's belief, through its measurement model."""
-        t = self.task
-        reading = reading_of(skill, t.knowledge, self.noise(), t.knowledge_across)
-        t.knowledge.update(reading.with_value(value), obs.t)
+        observe(self.task, skill, value, obs.t, self.noise())
 
     def observe_rock(self, obs: Observation) -> None:
         """The rock's reading into the task's belief (the tilt and the face's height)."""

@@ -173,3 +173,15 @@ def test_a_strategy_registered_from_outside_runs_an_episode(plunge: object, tmp_
 def test_hold_is_a_constant_target() -> None:
     target = GripperTarget.trusted(np.zeros(3), (1.0, 0.0, 0.0, 0.0), np.zeros(3), np.zeros(3), 0.0)
     assert Hold(target).sample(3.0) is target
+
+
+def test_no_module_of_the_strategies_is_over_450_lines() -> None:
+    """The strategies are scripts of skills, each a module of its own: none grows past 450 lines."""
+    from pathlib import Path
+
+    import peg_ctrl.tasks.strategies as package
+
+    root = Path(package.__file__).parent
+    sizes = {p.relative_to(root).as_posix(): len(p.read_text().splitlines()) for p in root.rglob("*.py")}
+    assert {"plan.py", "probe.py", "locate.py", "skills/models.py"} <= set(sizes)
+    assert max(sizes.values()) <= 450, {k: v for k, v in sizes.items() if v > 450}

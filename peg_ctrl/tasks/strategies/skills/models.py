@@ -42,10 +42,12 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from peg_ctrl.tasks.belief import Reading, TaskBelief, rows
+from peg_ctrl.tasks.strategies.base import HeldInsertion
 
-__all__ = ["DURATION", "LANDING_S", "SkillNoise", "expected_landings", "reading_of"]
+__all__ = ["DURATION", "LANDING_S", "SkillNoise", "expected_landings", "observe", "reading_of"]
 
 #: Expected seconds per skill (module docstring): sides (3 touches, with the move to the first),
 #: rock (the move to the datum, the touch, four turned landings, the turn upright), face
@@ -68,6 +70,24 @@ class SkillNoise:
     rock_angle: float
     side_turn: float
     rock_turns: tuple[float, ...] = (1.0, -1.0, 1.6, -1.6)  # the free-end rock's landings, x rock_angle
+
+    @classmethod
+    def of(cls, task: HeldInsertion, rock_angle: float, side_turn: float = 0.0) -> SkillNoise:
+        """The noise the task's cell states (its repeatability, drawing, clearance, peg)."""
+        return cls(
+            position=task.pose_repeatability,
+            drawing=task.drawing_tolerance,
+            clearance=task.hole_radius - task.radius,
+            radius=task.radius,
+            rock_angle=rock_angle,
+            side_turn=side_turn,
+        )
+
+
+def observe(task: HeldInsertion, skill: str, value: ArrayLike, t: float, noise: SkillNoise) -> None:
+    """``skill``'s reading ``value`` at ``t`` [s] into the task's belief, through its measurement model."""
+    reading = reading_of(skill, task.knowledge, noise, task.knowledge_across)
+    task.knowledge.update(reading.with_value(value), t)
 
 
 def expected_landings(cov: np.ndarray, capture: float) -> float:
