@@ -51,7 +51,7 @@ from peg_ctrl.sim.jaw import load_default
 from peg_ctrl.sim.physics import PhysicsConfig, PhysicsProfile
 from peg_ctrl.sim.physics import profile as physics_profile
 from peg_ctrl.sim.scene import SceneConfig, build_model, check_scene
-from peg_ctrl.tasks.base import TaskContext, TaskSpec, belief_task, insertion_task
+from peg_ctrl.tasks.base import TaskContext, TaskSpec, insertion_task, skill_task
 from peg_ctrl.tasks.monitors import ContactMonitor, GraspMonitor, InsertionMeasure
 from peg_ctrl.tasks.pick_and_place import RandomizationConfig, SuccessConfig, TaskConfig
 from peg_ctrl.tasks.strategies import strategy_name
@@ -549,7 +549,7 @@ def _result(
     inserting = insertion_task(task)
     m = inserting.insertion.last if inserting is not None else None
     records = task.records
-    believing = belief_task(task)
+    playing = skill_task(task)
     grasp = loop.grasp
     time_to_insert = inserting.time_to_insert if inserting is not None else None
     fields = contact_fields(loop, m, seated=outcome.status == "success", assets=cfg.scene.assets)
@@ -576,8 +576,8 @@ def _result(
         log_path=str(logger.log_path),
         trace_path=str(logger.npz_path),
         phases=[r.to_dict() for r in records],
-        belief=believing.readings if believing is not None else [],
-        skills=believing.skill_log if believing is not None else [],
+        belief=playing.readings if playing is not None else [],
+        skills=playing.skill_log if playing is not None else [],
         **loop_fields(loop),
         environment=environment_id(),
     )

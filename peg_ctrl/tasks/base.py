@@ -40,9 +40,11 @@ __all__ = [
     "Capabilities",
     "InsertionTask",
     "BeliefTask",
+    "SkillTask",
     "check_capabilities",
     "insertion_task",
     "belief_task",
+    "skill_task",
     "TaskSpec",
     "TaskContext",
     "PhaseRecord",
@@ -114,10 +116,13 @@ class Capabilities:
         belief: The task states what it believes about the hole and the grasp
             (:class:`BeliefTask`: ``belief``), which the loop hands to a controller that
             observes beliefs.
+        skills: The task's strategy plays skills into a belief (:class:`SkillTask`: ``readings``,
+            ``skill_log``); the episode summary records them (``belief``, ``skills``).
     """
 
     insertion: bool = False
     belief: bool = False
+    skills: bool = False
 
 
 class Task(Protocol):
@@ -188,10 +193,15 @@ class BeliefTask(Task, Protocol):
         """The hole and the grasp as the task believes them (a new object when they change)."""
         ...
 
+
+class SkillTask(Task, Protocol):
+    """A task with ``Capabilities(skills=True)``: its strategy plays skills whose readings a
+    belief takes in (:mod:`peg_ctrl.tasks.belief`)."""
+
     @property
     def readings(self) -> list[dict[str, Any]]:
         """What the task's belief took in so far, reading by reading: the time, the skill, the
-        information [bits] and the belief's spreads after it (peg_ctrl.tasks.belief)."""
+        information [bits] and the belief's spreads after it."""
         ...
 
     @property
@@ -204,7 +214,7 @@ class BeliefTask(Task, Protocol):
 _ABSENT = object()
 
 #: Each capability (a :class:`Capabilities` field) and the protocol whose members it promises.
-_PROTOCOLS: dict[str, type] = {"insertion": InsertionTask, "belief": BeliefTask}
+_PROTOCOLS: dict[str, type] = {"insertion": InsertionTask, "belief": BeliefTask, "skills": SkillTask}
 
 
 def _members(protocol: type) -> tuple[str, ...]:
@@ -247,6 +257,11 @@ def insertion_task(task: Task) -> InsertionTask | None:
 def belief_task(task: Task) -> BeliefTask | None:
     """``task`` as a :class:`BeliefTask` if it declares ``belief``, else None."""
     return cast("BeliefTask", task) if task.capabilities.belief else None
+
+
+def skill_task(task: Task) -> SkillTask | None:
+    """``task`` as a :class:`SkillTask` if it declares ``skills``, else None."""
+    return cast("SkillTask", task) if task.capabilities.skills else None
 
 
 class TaskContext(NamedTuple):

@@ -164,7 +164,7 @@ class HeldInsertionTask(PlannedMoves):
     It is the :class:`~peg_ctrl.tasks.strategies.HeldInsertion` its strategy drives."""
 
     name = "held_insertion"
-    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True, belief=True)
+    capabilities: ClassVar[Capabilities] = Capabilities(insertion=True, belief=True, skills=True)
 
     def __init__(
         self,

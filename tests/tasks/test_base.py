@@ -21,6 +21,7 @@ from peg_ctrl.tasks.base import (
     BeliefTask,
     Capabilities,
     InsertionTask,
+    SkillTask,
     TaskContext,
     TaskSpec,
     belief_task,
@@ -34,7 +35,7 @@ HOME = GripperTarget(p_world=np.array([-0.2, 0.0, 0.2]), quat_world=np.array([1.
 #: What each registered task offers beyond the Task protocol.
 REGISTERED = {
     "pick_and_place": Capabilities(insertion=True),
-    "held_insertion": Capabilities(insertion=True, belief=True),
+    "held_insertion": Capabilities(insertion=True, belief=True, skills=True),
 }
 
 
@@ -80,11 +81,12 @@ def test_the_drivers_own_tasks_declare_theirs(loops: dict[str, Loop]) -> None:
 
 
 def test_each_capability_is_a_protocol_s_members() -> None:
-    assert [f.name for f in dataclasses.fields(Capabilities)] == ["insertion", "belief"]
+    assert [f.name for f in dataclasses.fields(Capabilities)] == ["insertion", "belief", "skills"]
     assert {"insertion", "seated", "time_to_insert"} <= set(vars(InsertionTask)) | set(
         InsertionTask.__annotations__
     )
     assert "belief" in vars(BeliefTask)
+    assert {"readings", "skill_log"} <= set(vars(SkillTask))
 
 
 class Boasting(TrackingTask):
