@@ -108,32 +108,37 @@ class TaskBelief:
         return belief
 
     # -- reading --------------------------------------------------------------------------------
+    def _gain(self, reading: Reading) -> _Vec:
+        """The Kalman gain of ``reading``."""
+        H, P = reading.H, self.cov
+        return P @ H.T @ np.linalg.inv(H @ P @ H.T + reading.R)
+
+    def _after(self, reading: Reading, gain: _Vec) -> _Vec:
+        out = (np.eye(len(STATE)) - gain @ reading.H) @ self.cov
+        return 0.5 * (out + out.T)
+
     def posterior_cov(self, reading: Reading) -> _Vec:
         """The covariance after ``reading``, whatever its value."""
-        H, P = reading.H, self.cov
-        S = H @ P @ H.T + reading.R
-        K = P @ H.T @ np.linalg.inv(S)
-        out = (np.eye(len(STATE)) - K @ H) @ P
-        return 0.5 * (out + out.T)
+        return self._after(reading, self._gain(reading))
 
     def information(self, reading: Reading, of: Sequence[str] = STATE) -> float:
         """What ``reading`` would teach of the quantities ``of`` [bits]: the log-ratio of their
         marginal covariance's volume before and after it."""
+        return self._bits(self.posterior_cov(reading), of)
+
+    def _bits(self, after: _Vec, of: Sequence[str] = STATE) -> float:
         k = [_INDEX[name] for name in of]
-        before = self.cov[np.ix_(k, k)]
-        after = self.posterior_cov(reading)[np.ix_(k, k)]
-        return 0.5 * math.log2(np.linalg.det(before) / np.linalg.det(after))
+        return 0.5 * math.log2(np.linalg.det(self.cov[np.ix_(k, k)]) / np.linalg.det(after[np.ix_(k, k)]))
 
     def update(self, reading: Reading, t: float) -> float:
         """Take a made reading (Kalman update); returns its information about the state [bits]."""
         if reading.z is None:
             raise ValueError(f"the reading of {reading.skill} has no value")
-        H, P = reading.H, self.cov
-        S = H @ P @ H.T + reading.R
-        K = P @ H.T @ np.linalg.inv(S)
-        bits = self.information(reading)
-        self.mean = self.mean + K @ (reading.z - H @ self.mean)
-        self.cov = self.posterior_cov(reading)
+        gain = self._gain(reading)
+        after = self._after(reading, gain)
+        bits = self._bits(after)
+        self.mean = self.mean + gain @ (reading.z - reading.H @ self.mean)
+        self.cov = after
         self.history.append({"t": float(t), "skill": reading.skill, "bits": bits, **self.spread()})
         return bits
 
@@ -174,9 +179,3 @@ class TaskBelief:
             "tilt_mrad": 1e3 * self.sigma("tilt"),
             "face_um": 1e6 * self.sigma("face_z"),
         }
-
-    def entropy_bits(self) -> float:
-        """The belief's differential entropy [bits] (in metres and radians: only its differences
-        mean anything)."""
-        n = len(STATE)
-        return 0.5 * math.log2(((2.0 * math.pi * math.e) ** n) * float(np.linalg.det(self.cov)))

@@ -80,6 +80,7 @@ from peg_ctrl.tasks.monitors import (
 from peg_ctrl.tasks.phases import DONE, Motion, PhaseMachine, PhaseSpec, PlannedMoves
 from peg_ctrl.tasks.pick_and_place import SuccessConfig
 from peg_ctrl.tasks.strategies import ForceConfig, Strategy, StrategyConfig
+from peg_ctrl.tasks.strategies.skills import PAD_NORMAL
 
 __all__ = ["HeldInsertionConfig", "HeldInsertionTask", "Disturbance"]  # Disturbance: held_start
 
@@ -93,8 +94,6 @@ _TOUCH_HOLD = 0.01  # a contact must last this long to count [s]
 _ACCEL_HZ = 30.0  # the wrench estimate's acceleration filter [Hz]
 _SPEED_RESOLUTION = 0.001  # the seated detection's floor on the speed noise [m/s]
 _SPEED_HZ = 5.0  # the sensed hand velocity's low-pass (encoder velocities are differences) [Hz]
-
-_PAD_NORMAL = np.array([1.0, 0.0, 0.0])  # the jaw's closing direction, gripper frame
 
 
 @dataclasses.dataclass(frozen=True)
@@ -308,7 +307,6 @@ class HeldInsertionTask(PlannedMoves):
         self._wrist = WristSensor(
             model, centre_body=self._b_body, dt=self.control_dt, force_hz=30.0, accel_hz=_ACCEL_HZ
         )
-        self._reset_knowledge(np.array([1.0, 0.0, 0.0, 0.0]))  # the hand's start orientation: start()
         self.strategy = self.cfg.strategy.build(self)
         self.machine = PhaseMachine(self.phase_table())
         self.seated.reset()
@@ -324,10 +322,10 @@ class HeldInsertionTask(PlannedMoves):
         the frame of the hand at ``quat``: the end can sit off the believed one across the pads
         (horizontal, square to their closing direction, the gripper's x)."""
         self.knowledge_quat = np.asarray(quat, dtype=float).copy()
-        closing = rotate(self.knowledge_quat, _PAD_NORMAL)
+        closing = rotate(self.knowledge_quat, PAD_NORMAL)
         self.knowledge_across = np.array([-closing[1], closing[0]]) / math.hypot(closing[0], closing[1])
         # A tilt about the pads' normal swings the end: grip_length (n x up) per radian, backwards.
-        swing = -self._grip_length * rotate(self.knowledge_quat, np.cross(_PAD_NORMAL, self._up_body))
+        swing = -self._grip_length * rotate(self.knowledge_quat, np.cross(PAD_NORMAL, self._up_body))
         self.knowledge = TaskBelief.prior(
             self.observed_hole,
             self.cfg.position_noise,
@@ -440,7 +438,7 @@ class HeldInsertionTask(PlannedMoves):
         # The belief's reference moves with the revision: the end by as much as the believed one
         # moved (in the belief's frame), the tilt by the turn about the pads' normal.
         turn = math.atan2(
-            float(np.dot(np.cross(self._up_body, up_body), _PAD_NORMAL)),
+            float(np.dot(np.cross(self._up_body, up_body), PAD_NORMAL)),
             float(np.dot(self._up_body, up_body)),
         )
         b_old = self._b_body

@@ -34,7 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -154,17 +154,16 @@ class PlanStrategy(LocateStrategy):
 
     def _skill_rows(self) -> dict[str, PhaseSpec]:
         """``locate``'s rows, the last of each skill handing back to the planner."""
-        rows = LocateStrategy.phase_table(self)
+        t, rows = self.task, LocateStrategy.phase_table(self)
         table = {name: rows[name] for name in ("datum", "touch", "rock", "transfer", "probe", "insert")}
-        table["side_move"] = dataclasses.replace(rows["approach"])
+        table["side_move"] = rows["approach"]
         table["sides"] = dataclasses.replace(rows["sides"], next=self._decide)
         # The rock's fit gives the face's height: no reference landing, only the turn upright.
         table["reference"] = PhaseSpec(
-            self._enter_upright, self._motion_done, self._decide, Timeout(0.5, True), tick=self.task.feel
+            self._enter_upright, self._motion_done, self._decide, Timeout(0.5, True), tick=t.feel
         )
         table["probe"] = dataclasses.replace(rows["probe"], next=self._after_mouth)
         table["centre"] = dataclasses.replace(rows["centre"], next=self._decide)
-        t = self.task
         table["face_move"] = PhaseSpec(
             self._enter_face_move, self._motion_done, "face", Timeout(0.5, True), tick=t.feel_free
         )
@@ -219,7 +218,7 @@ class PlanStrategy(LocateStrategy):
         entry["t_end"] = float(obs.t)
         entry["outcome"] = self.inner.records[-1].outcome
         entry["phases"] = [
-            {"phase": r.phase, "t_start": r.t_start, "t_end": r.t_end, "outcome": r.outcome}
+            r.to_dict()
             for r in self.inner.records
             if r.phase in SKILLS[self._skill] and r.t_start >= entry["t_start"]
         ]
@@ -338,8 +337,8 @@ class PlanStrategy(LocateStrategy):
         three sigma of where the end must go beyond the belief's centre, towards the datum),
         down to ``touch_gap`` above the face as believed."""
         t, c = self.task, self.cfg
-        centre, cov = t.knowledge.relative()
-        reach = self.capture() + 3.0 * math.sqrt(float(np.linalg.eigvalsh(cov)[-1])) + 0.001
+        centre, _ = t.knowledge.relative()
+        reach = self.capture() + 3.0 * t.knowledge.relative_sigma() + 0.001
         point = centre - reach * np.array([1.0, 1.0]) / math.sqrt(2.0)
         q = np.asarray(t.goal.quat_world)
         tip = t.believed_bottom(obs)
@@ -437,13 +436,8 @@ class PlanStrategy(LocateStrategy):
         """The search's prior: where the task's belief puts the believed end over the hole, with
         its covariance (long across the pads while the end's offset is not known)."""
         centre, cov = self.task.knowledge.relative()
-        sigma = math.sqrt(float(np.linalg.eigvalsh(cov)[-1]))
+        sigma = self.task.knowledge.relative_sigma()
         radius = min(max(3.0 * sigma, 2.0 * self.capture()), 0.009)
         return HoleBelief(
             (float(centre[0]), float(centre[1])), radius=radius, sigma=sigma, capture=self.capture(), cov=cov
         )
-
-
-def skill_choices(log: list[dict[str, Any]]) -> str:
-    """The skills an episode played, in order (``sides>rock>mouth>centre>descent``)."""
-    return ">".join(entry["skill"] for entry in log)
